@@ -1,0 +1,24 @@
+//! Triangle meshes: storage, topology, validation, measures (volume, area, normals, curvature)
+//! and OBJ input/output.
+//!
+//! This module knows nothing of the simulators or the C ABI; they build on it.
+
+mod curvature;
+mod measures;
+#[cfg(feature = "obj")]
+mod obj;
+mod report;
+mod topology;
+mod tri_mesh;
+
+pub use curvature::{CurvatureKind, vertex_curvature};
+pub use measures::{
+    BoundingBox, bounding_box, face_area_vectors, signed_volume, signed_volume_f64, surface_area,
+    triangle_min_angle, vertex_normals,
+};
+#[cfg(feature = "obj")]
+pub use obj::{load_obj, save_obj};
+pub use report::{MeshReport, require_closed_oriented_solid};
+pub(crate) use topology::NO_FACE;
+pub use topology::Topology;
+pub use tri_mesh::TriMesh;
