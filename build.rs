@@ -14,8 +14,7 @@ fn main() {
     println!("cargo:rerun-if-changed=build.rs");
 
     let crate_dir = PathBuf::from(env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
-    let mut config = cbindgen::Config::from_file(crate_dir.join("cbindgen.toml"))
-        .expect("cbindgen.toml must parse");
+    let mut config = cbindgen::Config::from_file(crate_dir.join("cbindgen.toml")).expect("cbindgen.toml must parse");
 
     // The version macros come from Cargo.toml, the same source as softshell_version_string(),
     // so the two cannot disagree.
@@ -33,11 +32,7 @@ fn main() {
          #define SOFTSHELL_ABI_VERSION ((SOFTSHELL_VERSION_MAJOR << 16) | (SOFTSHELL_VERSION_MINOR << 8) | SOFTSHELL_VERSION_PATCH)\n"
     ));
 
-    let bindings = match cbindgen::Builder::new()
-        .with_crate(&crate_dir)
-        .with_config(config)
-        .generate()
-    {
+    let bindings = match cbindgen::Builder::new().with_crate(&crate_dir).with_config(config).generate() {
         Ok(bindings) => bindings,
         Err(err) => panic!("cbindgen failed to generate include/softshell.h: {err}"),
     };

@@ -14,3 +14,4 @@
 pub mod error;
 pub mod ffi;
 pub mod mesh;
+pub mod parallel;

@@ -256,10 +256,7 @@ pub(crate) unsafe fn arg_slice<'a, T>(ptr: *const T, len: usize, name: &str) -> 
         return Ok(&[]);
     }
     if ptr.is_null() {
-        return Err(Error::new(
-            ErrorKind::NullArgument,
-            format!("argument `{name}` is NULL but its length is {len}"),
-        ));
+        return Err(Error::new(ErrorKind::NullArgument, format!("argument `{name}` is NULL but its length is {len}")));
     }
     check_alignment(ptr, name)?;
     if len.checked_mul(std::mem::size_of::<T>()).is_none_or(|bytes| bytes > isize::MAX as usize) {
@@ -296,10 +293,7 @@ pub(crate) unsafe fn arg_vec3(ptr: *const f32, name: &str) -> Result<[f32; 3]> {
     let values = unsafe { arg_slice(ptr, 3, name)? };
     let vector = [values[0], values[1], values[2]];
     if let Some(axis) = vector.iter().position(|v| !v.is_finite()) {
-        return Err(Error::invalid_argument(format!(
-            "argument `{name}`[{axis}] = {} is not finite",
-            vector[axis]
-        )));
+        return Err(Error::invalid_argument(format!("argument `{name}`[{axis}] = {} is not finite", vector[axis])));
     }
     Ok(vector)
 }
@@ -333,9 +327,8 @@ pub(crate) unsafe fn arg_path(ptr: *const c_char, name: &str) -> Result<PathBuf>
 
 /// Converts a `uint32_t` kind selector into its Rust enum; an unknown value is an error.
 pub(crate) fn arg_kind<T: TryFrom<u32>>(value: u32, name: &str, allowed: &str) -> Result<T> {
-    T::try_from(value).map_err(|_| {
-        Error::invalid_argument(format!("`{name}` = {value} is not a known value; use one of {allowed}"))
-    })
+    T::try_from(value)
+        .map_err(|_| Error::invalid_argument(format!("`{name}` = {value} is not a known value; use one of {allowed}")))
 }
 
 /// Copies `len` elements out through `(out, capacity, out_len)`: `fill` writes them into the

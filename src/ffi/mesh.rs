@@ -171,7 +171,10 @@ pub unsafe extern "C" fn softshell_mesh_from_arrays(
 /// # Safety
 /// `path` must be NULL or a NUL-terminated string; `out_mesh` NULL or writable.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn softshell_mesh_load_obj(path: *const c_char, out_mesh: *mut *mut SoftshellMesh) -> SoftshellStatus {
+pub unsafe extern "C" fn softshell_mesh_load_obj(
+    path: *const c_char,
+    out_mesh: *mut *mut SoftshellMesh,
+) -> SoftshellStatus {
     status_call("softshell_mesh_load_obj", || {
         // SAFETY: the caller promises a NUL-terminated string.
         let path = unsafe { arg_path(path, "path")? };
@@ -263,7 +266,10 @@ pub unsafe extern "C" fn softshell_mesh_triangle_count(mesh: *const SoftshellMes
 /// # Safety
 /// `mesh` must be NULL or a live mesh; `out` NULL or writable.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn softshell_mesh_report(mesh: *const SoftshellMesh, out: *mut SoftshellMeshReport) -> SoftshellStatus {
+pub unsafe extern "C" fn softshell_mesh_report(
+    mesh: *const SoftshellMesh,
+    out: *mut SoftshellMeshReport,
+) -> SoftshellStatus {
     status_call("softshell_mesh_report", || {
         // SAFETY: the caller promises a live mesh or NULL.
         let mesh = unsafe { arg_ref(mesh, "mesh")? };

@@ -48,10 +48,7 @@ pub extern "C" fn softshell_version_string() -> *const c_char {
 #[unsafe(no_mangle)]
 pub extern "C" fn softshell_status_name(status: u32) -> *const c_char {
     value_call("softshell_status_name", c"UNKNOWN".as_ptr(), || {
-        SoftshellStatus::ALL
-            .get(status as usize)
-            .map_or(c"UNKNOWN", |status| status.name())
-            .as_ptr()
+        SoftshellStatus::ALL.get(status as usize).map_or(c"UNKNOWN", |status| status.name()).as_ptr()
     })
 }
 

@@ -85,7 +85,8 @@ pub fn vertex_curvature(
                     0.5 * mean_curvature_normal.dot(normal[v].normalize_or_zero())
                 }
                 CurvatureKind::Gaussian => {
-                    let full = if boundary.is_some_and(|b| b[v]) { std::f64::consts::PI } else { std::f64::consts::TAU };
+                    let full =
+                        if boundary.is_some_and(|b| b[v]) { std::f64::consts::PI } else { std::f64::consts::TAU };
                     (full - angle_sum[v]) / area[v]
                 }
             }

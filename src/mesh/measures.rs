@@ -62,11 +62,8 @@ fn signed_volume_about(positions: &[Vec3], triangles: &[[u32; 3]], center: DVec3
 
 /// [`signed_volume`] for f64 positions (used where the caller holds them in double precision).
 pub fn signed_volume_f64(positions: &[DVec3], triangles: &[[u32; 3]]) -> f64 {
-    let center = if positions.is_empty() {
-        DVec3::ZERO
-    } else {
-        positions.iter().sum::<DVec3>() / positions.len() as f64
-    };
+    let center =
+        if positions.is_empty() { DVec3::ZERO } else { positions.iter().sum::<DVec3>() / positions.len() as f64 };
     triangles
         .iter()
         .map(|t| {
@@ -85,10 +82,7 @@ pub fn surface_area(positions: &[Vec3], triangles: &[[u32; 3]]) -> f64 {
 }
 
 /// For each triangle, `(x_b - x_a) × (x_c - x_a)` in f64: twice its area times its unit normal.
-pub fn face_area_vectors<'a>(
-    positions: &'a [Vec3],
-    triangles: &'a [[u32; 3]],
-) -> impl Iterator<Item = DVec3> + 'a {
+pub fn face_area_vectors<'a>(positions: &'a [Vec3], triangles: &'a [[u32; 3]]) -> impl Iterator<Item = DVec3> + 'a {
     triangles.iter().map(move |t| {
         let a = positions[t[0] as usize].as_dvec3();
         let b = positions[t[1] as usize].as_dvec3();

@@ -13,8 +13,8 @@ mod tri_mesh;
 
 pub use curvature::{CurvatureKind, vertex_curvature};
 pub use measures::{
-    BoundingBox, bounding_box, face_area_vectors, signed_volume, signed_volume_f64, surface_area,
-    triangle_min_angle, vertex_normals,
+    BoundingBox, bounding_box, face_area_vectors, signed_volume, signed_volume_f64, surface_area, triangle_min_angle,
+    vertex_normals,
 };
 #[cfg(feature = "obj")]
 pub use obj::{load_obj, save_obj};

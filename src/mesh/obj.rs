@@ -23,7 +23,9 @@ pub fn load_obj(path: &Path) -> Result<TriMesh> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(format!("cannot read OBJ file {shown}: {e}")))?;
     let vertex_count = precheck(&text).map_err(|(line, what)| Error::io(format!("{shown}:{line}: {what}")))?;
     if vertex_count < 3 {
-        return Err(Error::invalid_mesh(format!("{shown}: the file has {vertex_count} vertices; a mesh needs at least 3")));
+        return Err(Error::invalid_mesh(format!(
+            "{shown}: the file has {vertex_count} vertices; a mesh needs at least 3"
+        )));
     }
 
     // One polygon through every vertex in file order registers them with tobj in that order.
@@ -97,9 +99,9 @@ fn precheck(text: &str) -> std::result::Result<usize, (usize, String)> {
                 }
                 for corner in corners {
                     let index_text = corner.split('/').next().unwrap_or("");
-                    let index: i64 = index_text
-                        .parse()
-                        .map_err(|_| (number, format!("face vertex `{corner}` does not start with an integer index")))?;
+                    let index: i64 = index_text.parse().map_err(|_| {
+                        (number, format!("face vertex `{corner}` does not start with an integer index"))
+                    })?;
                     if index == 0 {
                         return Err((number, "face vertex index 0: OBJ indices start at 1".to_owned()));
                     }
@@ -130,8 +132,14 @@ pub fn save_obj(positions: &[Vec3], triangles: &[[u32; 3]], path: &Path) -> Resu
     let io_error = |e: std::io::Error| Error::io(format!("cannot write OBJ file {shown}: {e}"));
     let file = std::fs::File::create(path).map_err(io_error)?;
     let mut out = std::io::BufWriter::new(file);
-    writeln!(out, "# softshell {}: {} vertices, {} triangles", env!("CARGO_PKG_VERSION"), positions.len(), triangles.len())
-        .map_err(io_error)?;
+    writeln!(
+        out,
+        "# softshell {}: {} vertices, {} triangles",
+        env!("CARGO_PKG_VERSION"),
+        positions.len(),
+        triangles.len()
+    )
+    .map_err(io_error)?;
     for p in positions {
         writeln!(out, "v {} {} {}", p.x, p.y, p.z).map_err(io_error)?;
     }

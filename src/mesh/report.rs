@@ -168,11 +168,8 @@ mod tests {
     use glam::Vec3;
 
     fn tetra() -> TriMesh {
-        TriMesh::new(
-            vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z],
-            vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]],
-        )
-        .unwrap()
+        TriMesh::new(vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z], vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+            .unwrap()
     }
 
     #[test]
@@ -189,11 +186,9 @@ mod tests {
     #[test]
     fn inward_mesh_is_refused() {
         let mesh = tetra();
-        let flipped = TriMesh::new(
-            mesh.positions().to_vec(),
-            mesh.triangles().iter().map(|t| [t[0], t[2], t[1]]).collect(),
-        )
-        .unwrap();
+        let flipped =
+            TriMesh::new(mesh.positions().to_vec(), mesh.triangles().iter().map(|t| [t[0], t[2], t[1]]).collect())
+                .unwrap();
         let error = require_closed_oriented_solid(&flipped, &Topology::build(flipped.triangles(), 4), "x").unwrap_err();
         assert!(error.message.contains("reverse the winding"), "{}", error.message);
     }

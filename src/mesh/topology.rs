@@ -80,10 +80,7 @@ impl Topology {
         }
         half_edges.sort_unstable_by_key(|h| (h.key, h.face, h.side));
 
-        let mut topology = Topology {
-            face_edges: vec![[u32::MAX; 3]; triangles.len()],
-            ..Default::default()
-        };
+        let mut topology = Topology { face_edges: vec![[u32::MAX; 3]; triangles.len()], ..Default::default() };
         let mut start = 0;
         while start < half_edges.len() {
             let key = half_edges[start].key;
@@ -172,8 +169,7 @@ impl Topology {
     }
 
     fn find_non_manifold_vertices(&mut self, triangles: &[[u32; 3]], vertex_count: usize) {
-        self.non_manifold_vertices =
-            (0..vertex_count as u32).filter(|&v| self.fan_count(triangles, v) > 1).collect();
+        self.non_manifold_vertices = (0..vertex_count as u32).filter(|&v| self.fan_count(triangles, v) > 1).collect();
     }
 
     fn build_boundary_loops(&mut self, triangles: &[[u32; 3]]) {
@@ -200,9 +196,7 @@ impl Topology {
             while next != start {
                 boundary.push(next);
                 let from = outgoing.partition_point(|&(a, _)| a < next);
-                let Some(offset) = (from..outgoing.len())
-                    .take_while(|&i| outgoing[i].0 == next)
-                    .find(|&i| !used[i])
+                let Some(offset) = (from..outgoing.len()).take_while(|&i| outgoing[i].0 == next).find(|&i| !used[i])
                 else {
                     break; // an open chain (only at non-manifold boundary vertices)
                 };
