@@ -256,7 +256,10 @@ pub(crate) unsafe fn arg_slice<'a, T>(ptr: *const T, len: usize, name: &str) -> 
         return Ok(&[]);
     }
     if ptr.is_null() {
-        return Err(Error::new(ErrorKind::NullArgument, format!("argument `{name}` is NULL but its length is {len}")));
+        return Err(Error::new(
+            ErrorKind::NullArgument,
+            format!("argument `{name}` is NULL but its length says {len} elements"),
+        ));
     }
     check_alignment(ptr, name)?;
     if len.checked_mul(std::mem::size_of::<T>()).is_none_or(|bytes| bytes > isize::MAX as usize) {
