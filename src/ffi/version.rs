@@ -32,7 +32,7 @@ const ABI_VERSION: u32 = (parse_u32(env!("CARGO_PKG_VERSION_MAJOR")) << 16)
 /// the library match. Never fails.
 #[unsafe(no_mangle)]
 pub extern "C" fn softshell_abi_version() -> u32 {
-    ABI_VERSION
+    value_call("softshell_abi_version", ABI_VERSION, || ABI_VERSION)
 }
 
 /// The version of the library that is linked, as "major.minor.patch" (equal to
@@ -40,7 +40,7 @@ pub extern "C" fn softshell_abi_version() -> u32 {
 /// never free it. Never NULL.
 #[unsafe(no_mangle)]
 pub extern "C" fn softshell_version_string() -> *const c_char {
-    VERSION_STRING.as_ptr()
+    value_call("softshell_version_string", VERSION_STRING.as_ptr(), || VERSION_STRING.as_ptr())
 }
 
 /// The static name of a status value, such as "INVALID_MESH" for `SOFTSHELL_STATUS_INVALID_MESH`,
@@ -58,5 +58,5 @@ pub extern "C" fn softshell_status_name(status: u32) -> *const c_char {
 /// it; it stays valid until the next call into the library on the same thread. Never NULL.
 #[unsafe(no_mangle)]
 pub extern "C" fn softshell_last_error() -> *const c_char {
-    last_error_ptr()
+    value_call("softshell_last_error", c"".as_ptr(), last_error_ptr)
 }
