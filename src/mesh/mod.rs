@@ -7,6 +7,7 @@ mod curvature;
 mod measures;
 #[cfg(feature = "obj")]
 mod obj;
+mod ply;
 mod report;
 mod topology;
 mod tri_mesh;
@@ -18,6 +19,7 @@ pub use measures::{
 };
 #[cfg(feature = "obj")]
 pub use obj::{load_obj, save_obj};
+pub use ply::{VertexScalar, save_ply};
 pub use report::{MeshReport, require_closed_oriented_solid};
 pub use topology::Topology;
 pub use tri_mesh::TriMesh;
