@@ -163,6 +163,20 @@ SoftshellStatus softshell_mesh_load_obj(const char *path, struct SoftshellMesh *
 // `mesh` must be NULL or a live mesh; `path` NULL or a NUL-terminated string.
 SoftshellStatus softshell_mesh_save_obj(const struct SoftshellMesh *mesh, const char *path);
 
+// Writes a mesh as an ASCII PLY file with two float properties per vertex, `mean_curvature`
+// and `gaussian_curvature` (as `softshell_mesh_copy_vertex_curvature` computes them), and vertex
+// colours from the one selected by `colour_by` (`SOFTSHELL_CURVATURE_MEAN` or
+// `SOFTSHELL_CURVATURE_GAUSSIAN`): blue for negative, white for zero, red for positive, scaled
+// to the 2nd..98th percentiles. Opens in MeshLab, Blender and ParaView. Overwrites an existing
+// file. Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by` and
+// `SOFTSHELL_STATUS_IO` when the file cannot be written.
+//
+// # Safety
+// `mesh` must be NULL or a live mesh; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_mesh_save_ply(const struct SoftshellMesh *mesh,
+                                        const char *path,
+                                        uint32_t colour_by);
+
 // Destroys a mesh made by `softshell_mesh_from_arrays` or `softshell_mesh_load_obj`.
 // `softshell_mesh_free(NULL)` does nothing. Freeing a mesh twice is undefined behaviour.
 //

@@ -457,3 +457,39 @@ fn last_error_is_per_thread_and_empty_at_first() {
     .unwrap();
     std::thread::spawn(|| assert_eq!(last_error(), "", "another thread's failure must not show here")).join().unwrap();
 }
+
+#[test]
+fn ply_output_carries_both_curvatures_and_colours() {
+    let (p, t) = cube();
+    let mesh = mesh_from(&p, &t).unwrap();
+    let path = temp_path("cube.ply");
+    let c_path = CString::new(path.to_str().unwrap()).unwrap();
+    // SAFETY: live mesh, valid path.
+    assert_eq!(unsafe { softshell_mesh_save_ply(mesh, c_path.as_ptr(), 9) }, SoftshellStatus::InvalidArgument);
+    assert!(!path.exists(), "nothing written on failure");
+    // SAFETY: as above.
+    assert_eq!(
+        unsafe { softshell_mesh_save_ply(mesh, c_path.as_ptr(), SOFTSHELL_CURVATURE_GAUSSIAN) },
+        SoftshellStatus::Ok
+    );
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.starts_with("ply\nformat ascii 1.0\n"));
+    assert!(text.contains("element vertex 8\n") && text.contains("element face 12\n"));
+    assert!(text.contains("property float mean_curvature\nproperty float gaussian_curvature\n"));
+    let first_vertex: Vec<f64> = text
+        .split("end_header\n")
+        .nth(1)
+        .unwrap()
+        .lines()
+        .next()
+        .unwrap()
+        .split(' ')
+        .map(|x| x.parse().unwrap())
+        .collect();
+    assert_eq!(first_vertex.len(), 3 + 3 + 2);
+    // A cube corner has angle defect 2 pi - 3 pi/2 = pi/2 > 0.
+    assert!(first_vertex[7] > 0.0, "{first_vertex:?}");
+    // SAFETY: made above.
+    unsafe { softshell_mesh_free(mesh) };
+    std::fs::remove_file(&path).ok();
+}

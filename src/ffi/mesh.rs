@@ -6,7 +6,7 @@ use super::boundary::{
     SoftshellStatus, arg_kind, arg_path, arg_ref, arg_slice, copy_out, out_arg, status_call, value_call, write_out,
 };
 use crate::error::{Error, Result};
-use crate::mesh::{CurvatureKind, MeshReport, Topology, TriMesh, vertex_curvature};
+use crate::mesh::{CurvatureKind, MeshReport, Topology, TriMesh, VertexScalar, save_ply, vertex_curvature};
 
 /// Mean curvature H (1/m), for `..._copy_vertex_curvature`: positive where the surface bends away
 /// from its outward normal (1 everywhere on a unit sphere).
@@ -42,6 +42,15 @@ impl SoftshellMesh {
     fn new(mesh: TriMesh) -> Self {
         let topology = Topology::build(mesh.triangles(), mesh.vertex_count());
         Self { mesh, topology }
+    }
+
+    /// For each vertex, whether it lies on a boundary loop.
+    pub(crate) fn boundary_flags(&self) -> Vec<bool> {
+        let mut boundary = vec![false; self.mesh.vertex_count()];
+        for &v in self.topology.boundary_loops.iter().flatten() {
+            boundary[v as usize] = true;
+        }
+        boundary
     }
 }
 
@@ -221,6 +230,43 @@ pub(crate) fn save(_mesh: &TriMesh, _path: &std::path::Path) -> Result<()> {
     Err(Error::unsupported("OBJ writing", "obj"))
 }
 
+/// Writes a mesh as an ASCII PLY file with two float properties per vertex, `mean_curvature`
+/// and `gaussian_curvature` (as `softshell_mesh_copy_vertex_curvature` computes them), and vertex
+/// colours from the one selected by `colour_by` (`SOFTSHELL_CURVATURE_MEAN` or
+/// `SOFTSHELL_CURVATURE_GAUSSIAN`): blue for negative, white for zero, red for positive, scaled
+/// to the 2nd..98th percentiles. Opens in MeshLab, Blender and ParaView. Overwrites an existing
+/// file. Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by` and
+/// `SOFTSHELL_STATUS_IO` when the file cannot be written.
+///
+/// # Safety
+/// `mesh` must be NULL or a live mesh; `path` NULL or a NUL-terminated string.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_mesh_save_ply(
+    mesh: *const SoftshellMesh,
+    path: *const c_char,
+    colour_by: u32,
+) -> SoftshellStatus {
+    status_call("softshell_mesh_save_ply", || {
+        // SAFETY: the caller promises a live mesh or NULL.
+        let mesh = unsafe { arg_ref(mesh, "mesh")? };
+        // SAFETY: the caller promises a NUL-terminated string.
+        let path = unsafe { arg_path(path, "path")? };
+        let kind: CurvatureKind =
+            arg_kind(colour_by, "colour_by", "SOFTSHELL_CURVATURE_MEAN (0), SOFTSHELL_CURVATURE_GAUSSIAN (1)")?;
+        let boundary = mesh.boundary_flags();
+        let (positions, triangles) = (mesh.mesh.positions(), mesh.mesh.triangles());
+        let as_f32 = |k| -> Vec<f32> {
+            vertex_curvature(positions, triangles, Some(&boundary), k).into_iter().map(|v| v as f32).collect()
+        };
+        let (mean, gaussian) = (as_f32(CurvatureKind::Mean), as_f32(CurvatureKind::Gaussian));
+        let scalars = [
+            VertexScalar { name: "mean_curvature", values: &mean },
+            VertexScalar { name: "gaussian_curvature", values: &gaussian },
+        ];
+        save_ply(positions, triangles, &scalars, if kind == CurvatureKind::Mean { 0 } else { 1 }, &path)
+    })
+}
+
 /// Destroys a mesh made by `softshell_mesh_from_arrays` or `softshell_mesh_load_obj`.
 /// `softshell_mesh_free(NULL)` does nothing. Freeing a mesh twice is undefined behaviour.
 ///
@@ -360,12 +406,7 @@ pub unsafe extern "C" fn softshell_mesh_copy_vertex_curvature(
         let kind: CurvatureKind =
             arg_kind(kind, "kind", "SOFTSHELL_CURVATURE_MEAN (0), SOFTSHELL_CURVATURE_GAUSSIAN (1)")?;
         let n = mesh.mesh.vertex_count();
-        let mut boundary = vec![false; n];
-        for l in &mesh.topology.boundary_loops {
-            for &v in l {
-                boundary[v as usize] = true;
-            }
-        }
+        let boundary = mesh.boundary_flags();
         // Check the buffer before computing, so a size query costs nothing.
         // SAFETY: the caller promises the buffer; out_len is written in both branches.
         unsafe {
