@@ -25,7 +25,7 @@ pub struct Sym2 {
 
 impl Sym2 {
     /// The identity.
-    pub const IDENTITY: Sym2 = Sym2 { a: 1.0, b: 0.0, d: 1.0 };
+    pub(crate) const IDENTITY: Sym2 = Sym2 { a: 1.0, b: 0.0, d: 1.0 };
 
     /// `s I`.
     pub fn diagonal(s: f32) -> Self {
