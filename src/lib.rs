@@ -13,5 +13,11 @@
 
 pub mod error;
 pub mod ffi;
+#[cfg(feature = "shell")]
+pub mod material;
 pub mod mesh;
 pub mod parallel;
+#[cfg(feature = "shell")]
+pub mod shell;
+#[cfg(feature = "shell")]
+pub mod solver;

@@ -1,0 +1,1 @@
+//! The thin-shell contraction simulator (SPEC section 1).

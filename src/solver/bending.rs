@@ -1,0 +1,167 @@
+//! Isometric bending (SPEC 1.4; Bergou et al. 2006): per interior edge (x0, x1) with opposite
+//! vertices x2 (triangle x0 x1 x2) and x3 (triangle x0 x1 x3),
+//! `E = q/2 |Σ K_i x_i - target|²`, `q = 3/(A0 + A1)`, `∂E/∂x_i = q K_i (Σ K_j x_j - target)`.
+//!
+//! `target = 0` is the paper's flat-rest model. The rest-preserving default uses
+//! `target = R Σ K_i X_i`, with R the rotation that takes the stencil's rest frame (edge
+//! direction, mean face normal, their cross product) to its current frame. R is held fixed while
+//! the gradient is taken (it changes only with the stencil's rigid motion, as in shape matching),
+//! so the energy is zero at the rest shape and after any rigid motion of the stencil.
+
+use glam::Vec3;
+
+/// Below this `|u × v|` a cotangent is taken as 0 (SPEC 1.4 guard).
+const MIN_CROSS: f32 = 1e-20;
+
+/// Rest data of one bending stencil.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BendingRest {
+    /// `K = (c03 + c04, c01 + c02, -c01 - c03, -c02 - c04)`, `Σ K = 0`.
+    pub k: [f32; 4],
+    /// `q = 3/(A0 + A1)`.
+    pub q: f32,
+    /// `Σ K_i X_i` in the rest frame's coordinates (edge, normal, binormal).
+    pub rest_local: Vec3,
+}
+
+fn cot(u: Vec3, v: Vec3) -> f32 {
+    let cross = u.cross(v).length();
+    if cross < MIN_CROSS { 0.0 } else { u.dot(v) / cross }
+}
+
+/// The stencil's frame: unit edge direction, unit mean normal and their cross product; `None`
+/// when the two faces fold onto each other or collapse.
+#[inline]
+fn frame(x: &[Vec3; 4]) -> Option<[Vec3; 3]> {
+    let e0 = x[1] - x[0];
+    let len = e0.length();
+    if !(len > 0.0) {
+        return None;
+    }
+    let e = e0 / len;
+    let n = e0.cross(x[2] - x[0]) + (x[3] - x[0]).cross(e0);
+    let n = n - e * n.dot(e);
+    let n_len = n.length();
+    if !(n_len > 1e-12 * len * len) {
+        return None;
+    }
+    let n = n / n_len;
+    Some([e, n, e.cross(n)])
+}
+
+#[inline]
+fn stencil_vector(x: &[Vec3; 4], k: &[f32; 4]) -> Vec3 {
+    // SPEC 1.4 precision: Σ K_i (x_i - x_0), never the expanded quadratic form.
+    (x[1] - x[0]) * k[1] + (x[2] - x[0]) * k[2] + (x[3] - x[0]) * k[3]
+}
+
+/// Rest data from rest positions, `None` when a face of the stencil is degenerate.
+pub fn bending_rest(x: [Vec3; 4]) -> Option<BendingRest> {
+    let e0 = x[1] - x[0];
+    let (e1, e2, e3, e4) = (x[2] - x[0], x[3] - x[0], x[2] - x[1], x[3] - x[1]);
+    let (a0, a1) = (0.5 * e0.cross(e1).length(), 0.5 * e0.cross(e2).length());
+    if !(a0 + a1 > 0.0) || a0 <= MIN_CROSS || a1 <= MIN_CROSS {
+        return None;
+    }
+    let (c01, c02, c03, c04) = (cot(e0, e1), cot(e0, e2), cot(-e0, e3), cot(-e0, e4));
+    let k = [c03 + c04, c01 + c02, -c01 - c03, -c02 - c04];
+    let v0 = stencil_vector(&x, &k);
+    let rest_local = match frame(&x) {
+        Some([e, n, b]) => Vec3::new(v0.dot(e), v0.dot(n), v0.dot(b)),
+        None => return None,
+    };
+    Some(BendingRest { k, q: 3.0 / (a0 + a1), rest_local })
+}
+
+/// Energy `E` and gradients of one stencil (see the module doc). `keep_rest` selects the
+/// rest-preserving target; `false` is the paper's flat-rest model.
+#[inline]
+pub fn bending_energy(x: &[Vec3; 4], rest: &BendingRest, keep_rest: bool) -> (f32, [Vec3; 4]) {
+    let mut v = stencil_vector(x, &rest.k);
+    if keep_rest {
+        if let Some([e, n, b]) = frame(x) {
+            v -= e * rest.rest_local.x + n * rest.rest_local.y + b * rest.rest_local.z;
+        }
+    }
+    let energy = 0.5 * rest.q * v.length_squared();
+    let qv = v * rest.q;
+    (energy, [qv * rest.k[0], qv * rest.k[1], qv * rest.k[2], qv * rest.k[3]])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Mat3;
+
+    fn stencil() -> [Vec3; 4] {
+        [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.1, 0.0), Vec3::new(0.4, 0.9, 0.3), Vec3::new(0.6, -0.8, 0.25)]
+    }
+
+    #[test]
+    fn k_sums_to_zero_and_flat_stencils_have_no_paper_energy() {
+        let r = bending_rest(stencil()).unwrap();
+        assert!(r.k.iter().sum::<f32>().abs() < 1e-5);
+        let flat = [Vec3::ZERO, Vec3::X, Vec3::new(0.4, 0.9, 0.0), Vec3::new(0.6, -0.8, 0.0)];
+        let rf = bending_rest(flat).unwrap();
+        assert!(bending_energy(&flat, &rf, false).0 < 1e-10);
+        // The paper's model pulls a bent rest shape towards flat (SPEC 1.4).
+        assert!(bending_energy(&stencil(), &r, false).0 > 1e-3);
+    }
+
+    #[test]
+    fn rest_preserving_energy_vanishes_at_rest_and_after_rigid_motion() {
+        let x = stencil();
+        let r = bending_rest(x).unwrap();
+        assert!(bending_energy(&x, &r, true).0 < 1e-10);
+        let rot = Mat3::from_axis_angle(Vec3::new(0.2, 1.0, -0.4).normalize(), 2.0);
+        let moved = x.map(|p| rot * p + Vec3::new(3.0, -1.0, 2.0));
+        assert!(bending_energy(&moved, &r, true).0 < 1e-9);
+        let mut bent = x;
+        bent[2].z += 0.3;
+        assert!(bending_energy(&bent, &r, true).0 > 1e-3);
+    }
+
+    #[test]
+    fn gradients_match_finite_differences() {
+        let x0 = stencil();
+        let r = bending_rest(x0).unwrap();
+        let mut x = x0;
+        x[2] += Vec3::new(0.05, -0.1, 0.2);
+        x[3] += Vec3::new(-0.1, 0.05, -0.15);
+        // Paper form: exact gradient.
+        let (_, g) = bending_energy(&x, &r, false);
+        let h = 1e-3;
+        for v in 0..4 {
+            for axis in 0..3 {
+                let (mut p, mut m) = (x, x);
+                p[v][axis] += h;
+                m[v][axis] -= h;
+                let fd = (bending_energy(&p, &r, false).0 - bending_energy(&m, &r, false).0) / (2.0 * h);
+                assert!(
+                    (fd - g[v][axis]).abs() < 2e-3 * g[v].length().max(1.0),
+                    "v{v} axis {axis}: {fd} vs {}",
+                    g[v][axis]
+                );
+            }
+        }
+        // Rest-preserving form: the gradient with the frame rotation held fixed.
+        let (_, g) = bending_energy(&x, &r, true);
+        let [e, n, b] = frame(&x).unwrap();
+        let target = e * r.rest_local.x + n * r.rest_local.y + b * r.rest_local.z;
+        let frozen = |y: &[Vec3; 4]| 0.5 * r.q * (stencil_vector(y, &r.k) - target).length_squared();
+        for v in 0..4 {
+            for axis in 0..3 {
+                let (mut p, mut m) = (x, x);
+                p[v][axis] += h;
+                m[v][axis] -= h;
+                let fd = (frozen(&p) - frozen(&m)) / (2.0 * h);
+                assert!((fd - g[v][axis]).abs() < 2e-3 * g[v].length().max(1.0), "rest v{v} axis {axis}");
+            }
+        }
+    }
+
+    #[test]
+    fn degenerate_stencils_are_refused() {
+        assert!(bending_rest([Vec3::ZERO, Vec3::X, Vec3::X * 2.0, Vec3::Y]).is_none());
+    }
+}

@@ -1,0 +1,16 @@
+//! Position-based constraint kernels (pure functions) and the deterministic graph colouring that
+//! lets Gauss-Seidel run in parallel.
+//!
+//! Owns: the triangle strain element (rest data, F, gradients from a stress), the PBD and XPBD
+//! energy constraints of SPEC 1.3, isometric bending (SPEC 1.4), the anisotropic push (SPEC 1.5),
+//! colouring. Must not know which simulator calls it or hold any state between calls.
+
+mod bending;
+mod colouring;
+mod energy_constraint;
+mod triangle;
+
+pub use bending::{BendingRest, bending_energy, bending_rest};
+pub use colouring::colour_constraints;
+pub use energy_constraint::{pbd_energy_correction, xpbd_energy_correction};
+pub use triangle::{TriangleRest, deformation_gradient, scatter_stress, triangle_rest};
