@@ -27,6 +27,51 @@
 // Gaussian curvature K (1/m^2) from the angle defect, for `..._copy_vertex_curvature`.
 #define SOFTSHELL_CURVATURE_GAUSSIAN 1
 
+// `SoftshellShellDef.solver`: consistent XPBD energy constraints (the default): Young's modulus
+// and thickness mean what they say, whatever the iteration count (SPEC 1.3).
+#define SOFTSHELL_SOLVER_XPBD 0
+
+// `SoftshellShellDef.solver`: the paper's plain PBD energy constraints `C = W`: stiffness is set
+// by the iteration count and Young's modulus has no effect (for reproducing the paper).
+#define SOFTSHELL_SOLVER_PBD 1
+
+// `SoftshellShellDef.material`: Saint Venant-Kirchhoff (the default and the paper's).
+#define SOFTSHELL_MATERIAL_STVK 0
+
+// `SoftshellShellDef.material`: corotated linear elasticity (thin polar decomposition).
+#define SOFTSHELL_MATERIAL_COROTATED 1
+
+// `SoftshellShellDef.material`: linear elasticity in the fixed rest frame (not rotation
+// invariant: for small motions only).
+#define SOFTSHELL_MATERIAL_LINEAR 2
+
+// `SoftshellShellDef.material`: compressible neo-Hookean.
+#define SOFTSHELL_MATERIAL_NEO_HOOKEAN 3
+
+// `SoftshellShellDef.material`: incompressible Mooney-Rivlin membrane with C10 = C01 = mu/4
+// (Poisson's ratio is not used).
+#define SOFTSHELL_MATERIAL_MOONEY_RIVLIN 4
+
+// `SoftshellShellDef.bending`: no bending constraints (none are stored).
+#define SOFTSHELL_BENDING_NONE 0
+
+// `SoftshellShellDef.bending`: the paper's isometric bending, whose rest shape is flat (it
+// slowly flattens a curved shell even without pressure).
+#define SOFTSHELL_BENDING_ISOMETRIC 1
+
+// `SoftshellShellDef.bending`: isometric bending that keeps the rest curvature (the default):
+// without pressure the shell keeps its shape.
+#define SOFTSHELL_BENDING_ISOMETRIC_REST 2
+
+// `SoftshellAnisotropyDef.energy`: as-rigid-as-possible fibre energy (the default; the paper's).
+#define SOFTSHELL_ANISOTROPY_ARAP 0
+
+// `SoftshellAnisotropyDef.energy`: St. Venant-Kirchhoff fibre energy `mu/2 (I5 - L^2)^2`.
+#define SOFTSHELL_ANISOTROPY_STVK 1
+
+// `SoftshellAnisotropyDef.energy`: square-root fibre energy `mu/2 (sqrt(I5) - L)^2`.
+#define SOFTSHELL_ANISOTROPY_SQRT 2
+
 // Result of every fallible call. Values are explicit and append-only: they are never renumbered.
 enum SoftshellStatus
 #if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
@@ -75,6 +120,16 @@ typedef uint32_t SoftshellStatus;
 // threads at once.
 typedef struct SoftshellMesh SoftshellMesh;
 
+// A thin shell squeezed by outside air pressure (SPEC section 1). Made by `softshell_shell_new`
+// from a closed mesh, destroyed by `softshell_shell_free`. Functions: `softshell_shell_step`,
+// `softshell_shell_add_anisotropic_region`, `softshell_shell_vertex_count`,
+// `softshell_shell_copy_positions`, `softshell_shell_copy_face_energy`,
+// `softshell_shell_copy_vertex_curvature`, `softshell_shell_memory_bytes`.
+//
+// Thread rules: a shell may move between threads but must not be used from two threads at
+// once; different shells may be stepped concurrently. Each shell owns its worker threads.
+typedef struct SoftshellShell SoftshellShell;
+
 // What a mesh is. Filled by `softshell_mesh_report`. Fields may be appended in later versions.
 typedef struct SoftshellMeshReport {
   // Number of vertices, used by a triangle or not.
@@ -117,6 +172,118 @@ typedef struct SoftshellMeshReport {
   // Smallest interior angle of any non-degenerate triangle, degrees (slivers are below 1).
   double min_angle_degrees;
 } SoftshellMeshReport;
+
+// Settings of a shell, filled by `softshell_shell_def_default()` and then edited field by field.
+// The defaults contract a closed mesh scaled to a unit bounding-box diagonal visibly: the
+// pressure exceeds what the membrane can carry, so the shell buckles and shrinks until
+// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 100 steps, the
+// finer kitten within about 25); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
+// (1 kg/m^2, membrane stiffness E t = 1 N/m); only the ratios pressure : E t : density t matter,
+// so a mesh of another size wants them scaled (pressure and E t with the size to keep the same
+// strains).
+typedef struct SoftshellShellDef {
+  // Time step h, s, in (0, 1]. Default 1/60.
+  float time_step;
+  // Substeps per step (each runs the whole step with h/substeps), 1..=1000. Default 1.
+  uint32_t substeps;
+  // Gauss-Seidel iterations per substep, 1..=1000. Default 5 (the paper's).
+  uint32_t iterations;
+  // `SOFTSHELL_SOLVER_XPBD` (default) or `SOFTSHELL_SOLVER_PBD` (the paper's form).
+  uint32_t solver;
+  // Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.5.
+  float pressure;
+  // `SOFTSHELL_MATERIAL_STVK` (default), `_COROTATED`, `_LINEAR`, `_NEO_HOOKEAN` or
+  // `_MOONEY_RIVLIN`.
+  uint32_t material;
+  // Young's modulus E, Pa, in (0, 1e12]. Default 1000 (with the default thickness: E t = 1 N/m).
+  float youngs_modulus;
+  // Poisson's ratio, in [0, 0.49]. Default 0.3.
+  float poisson_ratio;
+  // Shell thickness t, m, in (0, 1e3]. Default 0.001.
+  float thickness;
+  // Density, kg/m^3, in (0, 1e9]; with the thickness and the rest areas it gives the vertex
+  // masses (a third of each adjacent face). Default 1000.
+  float density;
+  // `SOFTSHELL_BENDING_ISOMETRIC_REST` (default), `_ISOMETRIC` (the paper's) or `_NONE`.
+  uint32_t bending;
+  // Bending coefficient kB, dimensionless, in [0, 1e6]. Default 0.01 (the paper's). With XPBD,
+  // each edge stencil gets the energy `kB E t (A0+A1)/2 * E_B`: kB = 1 makes bending as stiff
+  // as stretching at the scale of one triangle. With PBD it scales each bending correction,
+  // as in the paper.
+  float bending_coefficient;
+  // Velocity damping per second, in [0, 1e6]: velocities are scaled by max(0, 1 - damping h)
+  // each substep. Default 3 (light: it calms the buckling without slowing the
+  // contraction much).
+  float damping;
+  // The shell is finished (later steps do nothing) when V/V0 falls below this, in [0, 1);
+  // 0 = never. Default 0.3.
+  float stop_volume_ratio;
+  // Self-collision (continuous collision detection). Default true. The collision stage is not
+  // implemented yet: it currently does nothing and its stats stay 0.
+  bool collisions;
+  // Collision thickness delta relative to the bounding-box diagonal, in [0, 1]. Default 1e-4.
+  float collision_thickness;
+  // Worker threads: 0 = one per core, 1 = serial on the caller's thread (default), at most
+  // 256. Results are bit-identical whatever the count.
+  uint32_t threads;
+  // Set by `softshell_shell_def_default`; do not touch.
+  uint32_t internal_cookie;
+} SoftshellShellDef;
+
+// Settings of one anisotropic region (SPEC 1.5), filled by `softshell_anisotropy_def_default()`.
+typedef struct SoftshellAnisotropyDef {
+  // `SOFTSHELL_ANISOTROPY_ARAP` (default), `_STVK` or `_SQRT`.
+  uint32_t energy;
+  // Fibre stiffness mu, Pa, in [0, 1e12]. Default 10000 (10 times the default Young's
+  // modulus).
+  float stiffness;
+  // Inward push k_A (paper section 3.3), dimensionless, in [0, 1e6]: each vertex gradient of
+  // the fibre constraint gets `+ k_A sqrt(A0) n` (n the face's outward unit normal, A0 its rest
+  // area, so the push does not depend on the mesh scale), which turns corrections into an
+  // inward motion of the region. Default 0.5.
+  float inward_push;
+  // Target stretch L along the fibre, in (0, 1]: 1 = the paper's energies, below 1 = active
+  // contraction (the fibre wants to shorten to L). Default 1.
+  float target_stretch;
+  // Fibre direction in world space, finite. 0,0,0 (default) = chosen per face: the direction
+  // from the face's centre towards the region's centre, projected into the face, so fibres
+  // converge on the middle of the region.
+  float direction[3];
+  // Set by `softshell_anisotropy_def_default`; do not touch.
+  uint32_t internal_cookie;
+} SoftshellAnisotropyDef;
+
+// What one `softshell_shell_step` did. Fields may be appended in later versions.
+typedef struct SoftshellShellStats {
+  // Steps taken so far (after this one).
+  uint64_t step;
+  // Simulated time, s.
+  double time;
+  // Enclosed volume V, m^3.
+  double volume;
+  // V / V0 (V0 the rest volume).
+  double volume_ratio;
+  // True once the volume ratio fell below `stop_volume_ratio`.
+  bool finished;
+  // Largest relative constraint violation after the last iteration, dimensionless: with
+  // XPBD |C + alpha lambda| and with PBD |C|, where C = sqrt(2 W^) is made relative to the
+  // element (divided by sqrt(A0) for membrane and fibre constraints, so it reads like a strain).
+  double residual;
+  // Membrane energy, J.
+  double elastic_energy;
+  // Bending energy, J (with the XPBD stiffness `kB E t (A0+A1)/2`, for both solvers).
+  double bending_energy;
+  // Anisotropic fibre energy, J (`mu t A0 psi` summed over region faces).
+  double anisotropic_energy;
+  // Collision candidate pairs after the broad phase (0 while collisions are not implemented).
+  uint64_t collision_candidates;
+  // Exact continuous collision tests run (0 while collisions are not implemented).
+  uint64_t ccd_tests;
+  // Contacts resolved (0 while collisions are not implemented).
+  uint64_t contacts;
+  // Wall time of the step, s.
+  double step_seconds;
+} SoftshellShellStats;
 
 #ifdef __cplusplus
 extern "C" {
@@ -260,6 +427,125 @@ const char *softshell_status_name(uint32_t status);
 // failed on this thread. Successful calls leave it unchanged. Owned by the library: do not free
 // it; it stays valid until the next call into the library on the same thread. Never NULL.
 const char *softshell_last_error(void);
+
+// The default shell settings (see each field of `SoftshellShellDef`).
+struct SoftshellShellDef softshell_shell_def_default(void);
+
+// The default anisotropic-region settings (see each field of `SoftshellAnisotropyDef`).
+struct SoftshellAnisotropyDef softshell_anisotropy_def_default(void);
+
+// Creates a shell from `mesh` (copied: the mesh may be freed afterwards) with the settings of
+// `def` (made by `softshell_shell_def_default` and edited).
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL argument, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
+// for a def not made by `softshell_shell_def_default`, an unknown kind or a field out of range
+// (the message names the field, its value and the valid range), `SOFTSHELL_STATUS_INVALID_MESH`
+// for a mesh that is not closed, manifold, consistently oriented with outward normals and free
+// of degenerate triangles (the message names the first offending edge or triangle),
+// `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` feature. On success `*out_shell` receives a
+// new handle to free with `softshell_shell_free`; on failure it is left unchanged.
+//
+// # Safety
+// `mesh` must be NULL or a live mesh, `def` NULL or a readable def, `out_shell` NULL or writable.
+SoftshellStatus softshell_shell_new(const struct SoftshellMesh *mesh,
+                                    const struct SoftshellShellDef *def,
+                                    struct SoftshellShell **out_shell);
+
+// Destroys a shell. `softshell_shell_free(NULL)` does nothing; freeing twice is undefined
+// behaviour.
+//
+// # Safety
+// `shell` must be NULL or a live shell that is not used again.
+void softshell_shell_free(struct SoftshellShell *shell);
+
+// Makes the triangles `faces[0..face_count]` (indices into the mesh's triangles, distinct) an
+// anisotropic region with the settings of `def` (SPEC 1.5). Regions may be added at any time;
+// a face may belong to several regions. Storage for anisotropy exists only once a region is
+// added (see `softshell_shell_memory_bytes`).
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL shell or def or NULL faces with a count,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an empty region, a face out of range or repeated, a
+// def not made by `softshell_anisotropy_def_default` or a field out of range. Nothing changes
+// on failure.
+//
+// # Safety
+// `shell` must be NULL or a live shell; `faces` NULL or `face_count` readable uint32_t; `def`
+// NULL or a readable def.
+SoftshellStatus softshell_shell_add_anisotropic_region(struct SoftshellShell *shell,
+                                                       const uint32_t *faces,
+                                                       size_t face_count,
+                                                       const struct SoftshellAnisotropyDef *def);
+
+// Advances the shell by one time step (SPEC 1.1): pressure, prediction, `iterations`
+// Gauss-Seidel sweeps over the membrane, bending and anisotropic constraints, (collisions),
+// velocity update, volume ratio, all `substeps` times.
+//
+// `out_stats` may be NULL. When it is not, the energies and the residual are evaluated after
+// the last iteration (one extra pass over the constraints) and the stats are written there.
+// Once the shell is finished (volume ratio below `stop_volume_ratio`) a step does nothing and
+// returns the last stats with `finished` true and `step_seconds` 0.
+//
+// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a position became NaN or moved
+// more than two bounding-box diagonals): the shell is rolled back to its state before the step
+// and the message says what blew up and which settings would be stable. `out_stats` is then
+// not written.
+//
+// # Safety
+// `shell` must be NULL or a live shell; `out_stats` NULL or writable.
+SoftshellStatus softshell_shell_step(struct SoftshellShell *shell,
+                                     struct SoftshellShellStats *out_stats);
+
+// Number of vertices of the shell (the mesh's); 0 for NULL.
+//
+// # Safety
+// `shell` must be NULL or a live shell.
+size_t softshell_shell_vertex_count(const struct SoftshellShell *shell);
+
+// Copies the current positions (x,y,z per vertex, `3 * vertex_count` floats) into `out`.
+// If `out` is NULL or `capacity` (in floats) is too small, returns
+// `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
+// nothing else. On success `*out_len` is the number of floats written.
+//
+// # Safety
+// `shell` must be NULL or a live shell; `out` NULL or `capacity` writable floats; `out_len`
+// NULL or writable.
+SoftshellStatus softshell_shell_copy_positions(const struct SoftshellShell *shell,
+                                               float *out,
+                                               size_t capacity,
+                                               size_t *out_len);
+
+// Copies the membrane (elastic) energy of each triangle, J, in mesh triangle order (one float
+// per triangle), with the buffer rules of `softshell_shell_copy_positions`. Computed from the
+// current positions when called.
+//
+// # Safety
+// As `softshell_shell_copy_positions`.
+SoftshellStatus softshell_shell_copy_face_energy(const struct SoftshellShell *shell,
+                                                 float *out,
+                                                 size_t capacity,
+                                                 size_t *out_len);
+
+// Copies one curvature value per vertex of the current shape: `kind` is
+// `SOFTSHELL_CURVATURE_MEAN` (1/m) or `SOFTSHELL_CURVATURE_GAUSSIAN` (1/m^2), as in
+// `softshell_mesh_copy_vertex_curvature`; any other kind is `SOFTSHELL_STATUS_INVALID_ARGUMENT`.
+// Buffer rules as `softshell_shell_copy_positions` (one float per vertex).
+//
+// # Safety
+// As `softshell_shell_copy_positions`.
+SoftshellStatus softshell_shell_copy_vertex_curvature(const struct SoftshellShell *shell,
+                                                      uint32_t kind,
+                                                      float *out,
+                                                      size_t capacity,
+                                                      size_t *out_len);
+
+// Bytes held by the shell: its handle, rest data, state, scratch and worker pool bookkeeping.
+// Only what the scene uses is allocated: no bending data with `SOFTSHELL_BENDING_NONE`, no
+// anisotropy data before a region is added, no multipliers with the PBD solver, no pool with
+// `threads = 1`. 0 for NULL.
+//
+// # Safety
+// `shell` must be NULL or a live shell.
+size_t softshell_shell_memory_bytes(const struct SoftshellShell *shell);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -11,3 +11,5 @@ pub mod version;
 
 pub use boundary::SoftshellStatus;
 pub use mesh::{SoftshellMesh, SoftshellMeshReport};
+pub mod shell;
+pub use shell::{SoftshellAnisotropyDef, SoftshellShell, SoftshellShellDef, SoftshellShellStats};
