@@ -11,6 +11,7 @@
 #![deny(unsafe_op_in_unsafe_fn)]
 #![warn(missing_docs)]
 
+pub mod collision;
 pub mod error;
 pub mod ffi;
 #[cfg(feature = "shell")]

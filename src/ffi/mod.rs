@@ -6,6 +6,7 @@
 //! written for C readers.
 
 pub mod boundary;
+pub mod ccd;
 pub mod mesh;
 pub mod version;
 
