@@ -13,5 +13,7 @@
 
 pub mod error;
 pub mod ffi;
+#[cfg(feature = "lattice")]
+pub mod lattice;
 pub mod mesh;
 pub mod parallel;
