@@ -6,8 +6,10 @@
 //! written for C readers.
 
 pub mod boundary;
+pub mod lattice;
 pub mod mesh;
 pub mod version;
 
 pub use boundary::SoftshellStatus;
+pub use lattice::{SoftshellLattice, SoftshellLatticeDef, SoftshellLatticeStats};
 pub use mesh::{SoftshellMesh, SoftshellMeshReport};

@@ -145,9 +145,21 @@ impl LatticeLayout {
     /// The triangulated grid over the particles (indices are particle numbers), counter-clockwise
     /// seen from +y. A cell with four particles gives two triangles, a cell with three gives one.
     pub fn triangles(&self) -> Vec<[u32; 3]> {
-        let mut tris = Vec::new();
+        let mut tris = Vec::with_capacity(self.triangle_count());
+        self.for_each_triangle(|t| tris.push(t));
+        tris
+    }
+
+    /// Number of triangles of [`Self::triangles`], without building them.
+    pub fn triangle_count(&self) -> usize {
+        let mut count = 0;
+        self.for_each_triangle(|_| count += 1);
+        count
+    }
+
+    fn for_each_triangle(&self, mut emit: impl FnMut([u32; 3])) {
         if self.columns < 2 || self.rows < 2 {
-            return tris;
+            return;
         }
         for r in 0..self.rows - 1 {
             for c in 0..self.columns - 1 {
@@ -155,18 +167,17 @@ impl LatticeLayout {
                 let (a, b, cc, d) = (at(0, 0), at(1, 0), at(0, 1), at(1, 1));
                 match [a != HOLE, b != HOLE, cc != HOLE, d != HOLE] {
                     [true, true, true, true] => {
-                        tris.push([a, cc, b]);
-                        tris.push([b, cc, d]);
+                        emit([a, cc, b]);
+                        emit([b, cc, d]);
                     }
-                    [false, true, true, true] => tris.push([b, cc, d]),
-                    [true, false, true, true] => tris.push([a, cc, d]),
-                    [true, true, false, true] => tris.push([a, d, b]),
-                    [true, true, true, false] => tris.push([a, cc, b]),
+                    [false, true, true, true] => emit([b, cc, d]),
+                    [true, false, true, true] => emit([a, cc, d]),
+                    [true, true, false, true] => emit([a, d, b]),
+                    [true, true, true, false] => emit([a, cc, b]),
                     _ => {}
                 }
             }
         }
-        tris
     }
 
     /// Heap bytes held.
@@ -199,6 +210,8 @@ mod tests {
         }
         let full = LatticeLayout::new(4, 3, 1.0, None).unwrap();
         assert_eq!(full.triangles().len(), 2 * 3 * 2);
+        assert_eq!(full.triangle_count(), 12);
+        assert_eq!(l.triangle_count(), 4);
     }
 
     #[test]

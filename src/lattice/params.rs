@@ -20,6 +20,10 @@ pub struct LatticeParams {
     pub damping: f32,
     /// Time step h, s.
     pub time_step: f32,
+    /// Viscous damping of all motion, 1/s: every step `v *= max(0, 1 - velocity_damping h)`.
+    /// Region damping leaves rigid motion of regions alone, so the long, slow modes of a sheet
+    /// (a hanging sheet bouncing) need this to come to rest.
+    pub velocity_damping: f32,
     /// Mass of each particle, kg.
     pub particle_mass: f32,
     /// Gravity, m/s^2.
@@ -42,6 +46,7 @@ impl Default for LatticeParams {
             stiffness: 0.5,
             damping: 0.2,
             time_step: 1.0 / 60.0,
+            velocity_damping: 0.5,
             particle_mass: 0.01,
             gravity: [0.0, -9.81, 0.0],
             threads: 1,
@@ -88,6 +93,12 @@ impl LatticeParams {
             return Err(Error::invalid_argument(format!("`damping` = {} must be finite and in [0, 1]", self.damping)));
         }
         positive("time_step", self.time_step, 1.0, " s")?;
+        if !self.velocity_damping.is_finite() || self.velocity_damping < 0.0 || self.velocity_damping > 1e6 {
+            return Err(Error::invalid_argument(format!(
+                "`velocity_damping` = {} must be finite and in [0, 1e6] (1/s)",
+                self.velocity_damping
+            )));
+        }
         positive("particle_mass", self.particle_mass, 1e12, " kg")?;
         if let Some(axis) = self.gravity.iter().position(|g| !g.is_finite()) {
             return Err(Error::invalid_argument(format!("`gravity[{axis}]` = {} is not finite", self.gravity[axis])));

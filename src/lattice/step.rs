@@ -5,7 +5,8 @@
 //! 2. fit:      summed along z (row blocks in parallel); per region c, A, R = polar(A), t
 //! 3. spread:   per region [R e_x, R e_z, t (+ rigid motion)], summed along x          (rows in parallel)
 //! 4. update:   summed along z (row blocks in parallel); per particle goal g and
-//!              v += damping (v_rigid - v);  v += alpha (g - x)/h + h (gravity + f/m);  x += h v
+//!              v += damping (v_rigid - v);  v = keep v + alpha (g - x)/h + h (gravity + f/m);  x += h v
+//!              (keep = 1 - velocity_damping h)
 //! ```
 //! Rows and row blocks are fixed units of work and every reduction runs in block order, so the
 //! result is bit-identical whatever the thread count. The update writes into the `_next`
@@ -184,6 +185,7 @@ impl Lattice {
         let h = self.params.time_step as f64;
         let alpha = self.params.stiffness as f64;
         let damping = self.params.damping as f64;
+        let keep = (1.0 - self.params.velocity_damping as f64 * self.params.time_step as f64).max(0.0);
         let mass = self.params.particle_mass as f64;
         let gravity = DVec3::from(self.params.gravity.map(|g| g as f64));
         let (x, v) = (&self.x, &self.v);
@@ -242,7 +244,7 @@ impl Lattice {
                         if let Some(f) = force {
                             accel += DVec3::from(f[s]) / mass;
                         }
-                        vel += to_goal * (alpha / h) + accel * h;
+                        vel = vel * keep + to_goal * (alpha / h) + accel * h;
                         let new_x = DVec3::from(x[s]) + vel * h;
                         b.kinetic += 0.5 * mass * vel.length_squared();
                         if b.diverged.is_none() {
