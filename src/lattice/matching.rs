@@ -10,7 +10,7 @@
 
 use glam::{DMat3, DVec3};
 
-use super::polar::polar_rotation;
+use super::polar::polar_rotation_flat;
 
 /// Channels of the particle moments for shape matching.
 pub(crate) const MOMENT_CHANNELS: usize = 9;
@@ -68,11 +68,10 @@ pub(crate) fn fit_region(
     // SPEC 3: A = sum m~ x x0^T - M c c0^T (the y column is zero for the flat rest).
     let ax = DVec3::new(sums[3], sums[4], sums[5]) - c * (m * rest.c0[0]);
     let az = DVec3::new(sums[6], sums[7], sums[8]) - c * (m * rest.c0[1]);
-    let a = DMat3::from_cols(ax, DVec3::ZERO, az);
-    let r = polar_rotation(a, rotation_from_columns(previous), tiny);
+    let (rx, rz) = polar_rotation_flat(ax, az, rotation_from_columns(previous), tiny);
     // SPEC 3: t = c - R c0.
-    let t = c - r.x_axis * rest.c0[0] - r.z_axis * rest.c0[1];
-    let stored = [r.x_axis.x, r.x_axis.y, r.x_axis.z, r.z_axis.x, r.z_axis.y, r.z_axis.z];
+    let t = c - rx * rest.c0[0] - rz * rest.c0[1];
+    let stored = [rx.x, rx.y, rx.z, rz.x, rz.y, rz.z];
     (stored, t.to_array(), c)
 }
 

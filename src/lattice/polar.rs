@@ -53,6 +53,40 @@ pub(crate) fn polar_rotation(a: DMat3, previous: DMat3, tiny: f64) -> DMat3 {
     rotation_between((previous * v1).normalize_or_zero(), u1) * previous
 }
 
+/// [`polar_rotation`] for a flat region, `A = [ax, 0, az]` (the rest lies in the x-z plane, so
+/// A's y column is zero): `A^T A` reduces to the 2x2 block of `ax`, `az`, whose eigenvectors one
+/// exact Jacobi rotation gives, and R's x and z columns are `sum_i u_i v_i^T` over the two
+/// nonzero singular values (`v3 = e_y` only reaches R's y column, which is `R e_z x R e_x`).
+/// Returns R's x and z columns. Rank-deficient regions go to the general routine, which has the
+/// warm-start fallback.
+#[inline]
+pub(crate) fn polar_rotation_flat(ax: DVec3, az: DVec3, previous: DMat3, tiny: f64) -> (DVec3, DVec3) {
+    let (cxx, cxz, czz) = (ax.dot(ax), ax.dot(az), az.dot(az));
+    // One Jacobi rotation diagonalises the symmetric 2x2 [[cxx, cxz], [cxz, czz]] exactly.
+    let (c, s, lx, lz) = if cxz == 0.0 {
+        (1.0, 0.0, cxx, czz)
+    } else {
+        let theta = (czz - cxx) / (2.0 * cxz);
+        let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+        let c = 1.0 / (t * t + 1.0).sqrt();
+        (c, t * c, cxx - t * cxz, czz + t * cxz)
+    };
+    // Eigenvectors in (x, z): (c, -s) for lx, (s, c) for lz.
+    let ((v1, l1), (v2, l2)) = if lx >= lz { (((c, -s), lx), ((s, c), lz)) } else { (((s, c), lz), ((c, -s), lx)) };
+    // Rank 2 (s2 > RANK_TOLERANCE s1, both above tiny), tested on the squares: no square roots.
+    if l1 > tiny * tiny && l1.is_finite() && l2 > RANK_TOLERANCE * RANK_TOLERANCE * l1 && l2 > tiny * tiny {
+        // u_i = A v_i / s_i, normalised anyway, so the division by s_i is left out.
+        let u1 = (ax * v1.0 + az * v1.1).normalize_or_zero();
+        let u2 = ax * v2.0 + az * v2.1;
+        let u2 = (u2 - u1 * u1.dot(u2)).normalize_or_zero();
+        if u1 != DVec3::ZERO && u2 != DVec3::ZERO {
+            return (u1 * v1.0 + u2 * v2.0, u1 * v1.1 + u2 * v2.1);
+        }
+    }
+    let r = polar_rotation(DMat3::from_cols(ax, DVec3::ZERO, az), previous, tiny);
+    (r.x_axis, r.z_axis)
+}
+
 /// `a b^T`.
 #[inline]
 fn outer(a: DVec3, b: DVec3) -> DMat3 {
@@ -160,6 +194,28 @@ mod tests {
             assert!(is_rotation(r), "{r}");
             assert!(close(r, q, 1e-12), "case {i}: {r} vs {q}");
         }
+    }
+
+    #[test]
+    fn the_flat_shortcut_matches_the_general_routine() {
+        let prev = rotation(DVec3::new(0.1, 1.0, 0.3), 0.4);
+        let mut seed = 11u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64) / ((1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        for _ in 0..200 {
+            let ax = DVec3::new(next(), next(), next());
+            let az = DVec3::new(next(), next(), next());
+            let general = polar_rotation(DMat3::from_cols(ax, DVec3::ZERO, az), prev, 1e-30);
+            let (rx, rz) = polar_rotation_flat(ax, az, prev, 1e-30);
+            assert!((rx - general.x_axis).length() < 1e-9 && (rz - general.z_axis).length() < 1e-9);
+        }
+        // Rank 1 and 0 fall back to the general routine's warm start.
+        let (rx, rz) = polar_rotation_flat(DVec3::ZERO, DVec3::ZERO, prev, 1e-9);
+        assert_eq!((rx, rz), (prev.x_axis, prev.z_axis));
+        let (rx, _) = polar_rotation_flat(DVec3::X * 2.0, DVec3::ZERO, prev, 1e-9);
+        assert!((rx - DVec3::X).length() < 1e-12);
     }
 
     #[test]
