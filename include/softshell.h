@@ -110,6 +110,20 @@ typedef uint32_t SoftshellStatus;
 #endif // __STDC_VERSION__ >= 202311L
 #endif // __cplusplus
 
+// A FastLSM elastic lattice surface (SPEC 3): particles on a 2D lattice with an optional mask
+// of holes, shape-matched in overlapping square regions.
+//
+// Created by `softshell_lattice_new`, destroyed by `softshell_lattice_free`. Edited with
+// `softshell_lattice_pin` / `_unpin` / `_apply_force` / `_set_positions`, advanced with
+// `softshell_lattice_step`, read with `softshell_lattice_particle_count`, `_triangle_count`,
+// `_particle_index`, `_copy_positions`, `_copy_velocities`, `_copy_goals`, `_copy_triangles`
+// and `_memory_bytes`.
+//
+// Particles are numbered row by row (row 0 first, column 0 first within a row), holes skipped.
+// Thread rules: a lattice may move between threads, but must not be used from two threads at
+// once; different lattices may be stepped concurrently. It owns its worker threads.
+typedef struct SoftshellLattice SoftshellLattice;
+
 // An immutable triangle mesh: positions (float x,y,z) and triangles (uint32_t a,b,c,
 // counter-clockwise seen from outside). Every index is in range and every coordinate finite;
 // it may be open, non-manifold or hold degenerate triangles (see `softshell_mesh_report`).
@@ -129,6 +143,63 @@ typedef struct SoftshellMesh SoftshellMesh;
 // Thread rules: a shell may move between threads but must not be used from two threads at
 // once; different shells may be stepped concurrently. Each shell owns its worker threads.
 typedef struct SoftshellShell SoftshellShell;
+
+// Settings of a lattice, for `softshell_lattice_new`. Always start from
+// `softshell_lattice_def_default()` and edit fields: a def not made by it is refused.
+//
+// The sheet lies in the x-z plane at rest: particle (column, row) at
+// `(column * spacing, 0, row * spacing)`, its upper side facing +y.
+typedef struct SoftshellLatticeDef {
+  // Particles along x, >= 1. Default 32.
+  uint32_t columns;
+  // Particles along z, >= 1. Default 32. `columns * rows` is at most 67,108,864.
+  uint32_t rows;
+  // Rest distance between neighbouring particles, m, > 0. Default 0.05.
+  float spacing;
+  // Region half-width w >= 1: each particle's region is the (2w+1) x (2w+1) box of lattice
+  // sites around it (clipped by the border and the mask). Larger w = stiffer; the cost of a
+  // step does not grow with w. Default 2.
+  uint32_t region_half_width;
+  // alpha in (0, 1]: how hard particles are pulled to their goals each step (1 = all the way).
+  // Default 0.5.
+  float stiffness;
+  // Region damping in [0, 1]: the fraction of each particle's velocity relative to its
+  // regions' rigid motion removed per step (damps wobble, keeps rigid motion). Default 0.2.
+  // 0 turns it off and saves its memory and time.
+  float damping;
+  // Time step, s, in (0, 1]. Default 1/60.
+  float time_step;
+  // Mass of each particle, kg, > 0. Default 0.01.
+  float particle_mass;
+  // Gravity, m/s^2, finite. Default (0, -9.81, 0).
+  float gravity[3];
+  // Worker threads of this lattice: 0 = one per core, 1 = run on the caller's thread
+  // (default), at most 256. Results are bit-identical for any value.
+  uint32_t threads;
+  // Viscous damping of all motion, 1/s, in [0, 1e6]: each step velocities are scaled by
+  // `max(0, 1 - velocity_damping * time_step)`. Region damping leaves the slow, locally
+  // rigid modes alone (a hanging sheet bouncing); this brings them to rest. Default 0.5.
+  float velocity_damping;
+  // Set by `softshell_lattice_def_default`; do not touch.
+  uint32_t internal_cookie;
+} SoftshellLatticeDef;
+
+// What one `softshell_lattice_step` did. Fields may be appended in later versions.
+typedef struct SoftshellLatticeStats {
+  // Steps completed, this one included.
+  uint64_t step;
+  // Simulated time after the step, s.
+  double time;
+  // Mean over all particles (pinned ones included) of the distance from the particle to its
+  // goal, |g - x|, at the start of the step, m. 0 at rest and for any rigid motion.
+  double goal_distance;
+  // Wall-clock time the step took, s.
+  double step_seconds;
+  // Largest |g - x| over all particles at the start of the step, m.
+  double max_goal_distance;
+  // Kinetic energy of all particles after the step, J.
+  double kinetic_energy;
+} SoftshellLatticeStats;
 
 // What a mesh is. Filled by `softshell_mesh_report`. Fields may be appended in later versions.
 typedef struct SoftshellMeshReport {
@@ -352,6 +423,169 @@ SoftshellStatus softshell_ccd_edge_edge(const double *a0,
                                         double thickness,
                                         int32_t *out_hit,
                                         double *out_toi);
+
+// The default lattice settings (see each field of `SoftshellLatticeDef`), with the private
+// cookie that `softshell_lattice_new` checks. Never fails.
+struct SoftshellLatticeDef softshell_lattice_def_default(void);
+
+// Creates a lattice at rest from `def` and an optional `mask` of `rows * columns` bytes
+// (row-major: entry `row * columns + column`; 1 = particle, 0 = hole). NULL `mask` = a full sheet.
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` when `def` or `out_lattice` is NULL,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` when the def was not made by
+// `softshell_lattice_def_default`, a field is out of range (`region_half_width` = 0, `stiffness`
+// outside (0, 1], `spacing` <= 0, a NaN...) or the mask holds no particle or a value other than
+// 0 and 1 (the message names the field or mask entry), `SOFTSHELL_STATUS_UNSUPPORTED` when built
+// without the `lattice` feature. On success `*out_lattice` receives a new handle to free with
+// `softshell_lattice_free`; on failure it is left unchanged. The mask is copied.
+//
+// # Safety
+// `def` must be NULL or point to a `SoftshellLatticeDef`; `mask` NULL or `rows * columns`
+// readable bytes; `out_lattice` NULL or writable.
+SoftshellStatus softshell_lattice_new(const struct SoftshellLatticeDef *def,
+                                      const uint8_t *mask,
+                                      struct SoftshellLattice **out_lattice);
+
+// Destroys a lattice and stops its worker threads. `softshell_lattice_free(NULL)` does
+// nothing. Freeing a lattice twice is undefined behaviour.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice that is not used again.
+void softshell_lattice_free(struct SoftshellLattice *lattice);
+
+// Pins the particle at (`column`, `row`): from now on it keeps its position and has zero
+// velocity (it still shapes its regions). Pinning twice is harmless. Returns
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` when (column, row) is outside the lattice or a hole.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice.
+SoftshellStatus softshell_lattice_pin(struct SoftshellLattice *lattice,
+                                      uint32_t column,
+                                      uint32_t row);
+
+// Releases a particle pinned by `softshell_lattice_pin` (it starts at rest). Unpinning a
+// particle that is not pinned is harmless. Errors as `softshell_lattice_pin`.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice.
+SoftshellStatus softshell_lattice_unpin(struct SoftshellLattice *lattice,
+                                        uint32_t column,
+                                        uint32_t row);
+
+// Adds `force` (N, float[3]) to the particle at (`column`, `row`) for the next step only:
+// forces given before one step add up, and the step clears them. A force on a pinned particle
+// has no effect. Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL `force`,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a NaN/inf component or a site outside the lattice or
+// in a hole.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `force` NULL or three readable floats.
+SoftshellStatus softshell_lattice_apply_force(struct SoftshellLattice *lattice,
+                                              uint32_t column,
+                                              uint32_t row,
+                                              const float *force);
+
+// Sets the position of every particle from `positions` (x,y,z per particle in particle order,
+// `float_count` = 3 * particle count floats), e.g. to start from a draped or rotated shape.
+// Velocities are kept; the rest shape does not change. Returns
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` (and changes nothing) for a wrong count or a NaN/inf value.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `positions` NULL or `float_count` readable floats.
+SoftshellStatus softshell_lattice_set_positions(struct SoftshellLattice *lattice,
+                                                const float *positions,
+                                                size_t float_count);
+
+// Advances the lattice by one time step (SPEC 3): shape matching of every region, goals,
+// region damping, gravity and the forces given since the last step, pins.
+// `out_stats` may be NULL; otherwise it receives what the step did.
+//
+// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a value not finite, or a position
+// or speed beyond 1e15): the lattice is then exactly as before the call (the pending forces
+// included) and the message names the particle and the setting to change.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `out_stats` NULL or writable.
+SoftshellStatus softshell_lattice_step(struct SoftshellLattice *lattice,
+                                       struct SoftshellLatticeStats *out_stats);
+
+// Number of particles (sites of the mask that are not holes); 0 for NULL.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice.
+size_t softshell_lattice_particle_count(const struct SoftshellLattice *lattice);
+
+// Number of triangles of the triangulated grid (`softshell_lattice_copy_triangles`): two per
+// lattice cell whose four corners are particles, one per cell with three; 0 for NULL.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice.
+size_t softshell_lattice_triangle_count(const struct SoftshellLattice *lattice);
+
+// Heap bytes the lattice holds (its worker threads' stacks excluded); 0 for NULL. Storage for
+// region damping, pins and forces exists only when they are used.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice.
+size_t softshell_lattice_memory_bytes(const struct SoftshellLattice *lattice);
+
+// Writes to `*out_index` the number of the particle at (`column`, `row`), the index into
+// positions and triangles. Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` when (column, row) is
+// outside the lattice or a hole (then nothing is written).
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `out_index` NULL or writable.
+SoftshellStatus softshell_lattice_particle_index(const struct SoftshellLattice *lattice,
+                                                 uint32_t column,
+                                                 uint32_t row,
+                                                 uint32_t *out_index);
+
+// Copies the positions (x,y,z per particle in particle order, 3 * particle count floats, m)
+// into `out`. If `out` is NULL or `capacity` (in floats) is too small, returns
+// `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
+// nothing else. On success `*out_len` is the number of floats written.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `out` NULL or `capacity` writable floats;
+// `out_len` NULL or writable.
+SoftshellStatus softshell_lattice_copy_positions(const struct SoftshellLattice *lattice,
+                                                 float *out,
+                                                 size_t capacity,
+                                                 size_t *out_len);
+
+// Copies the velocities (m/s, 3 floats per particle) into `out`; buffer rules as
+// `softshell_lattice_copy_positions`.
+//
+// # Safety
+// As `softshell_lattice_copy_positions`.
+SoftshellStatus softshell_lattice_copy_velocities(const struct SoftshellLattice *lattice,
+                                                  float *out,
+                                                  size_t capacity,
+                                                  size_t *out_len);
+
+// Copies the goal positions of the current state (m, 3 floats per particle: where shape
+// matching pulls each particle, SPEC 3) into `out`; buffer rules as
+// `softshell_lattice_copy_positions`. Costs about one step; for inspection and debugging.
+//
+// # Safety
+// As `softshell_lattice_copy_positions`.
+SoftshellStatus softshell_lattice_copy_goals(const struct SoftshellLattice *lattice,
+                                             float *out,
+                                             size_t capacity,
+                                             size_t *out_len);
+
+// Copies the triangulated grid (a,b,c particle indices per triangle, 3 * triangle count
+// uint32_t, counter-clockwise seen from +y at rest) into `out`, e.g. to write the sheet as a
+// mesh. Buffer rules as `softshell_lattice_copy_positions` (capacity and `*out_len` count
+// uint32_t). The triangles never change, so one copy serves every frame.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `out` NULL or `capacity` writable uint32_t;
+// `out_len` NULL or writable.
+SoftshellStatus softshell_lattice_copy_triangles(const struct SoftshellLattice *lattice,
+                                                 uint32_t *out,
+                                                 size_t capacity,
+                                                 size_t *out_len);
 
 // Creates a mesh from arrays: `positions` holds `vertex_count` x,y,z float triples and
 // `triangles` holds `triangle_count` a,b,c index triples (counter-clockwise seen from outside).

@@ -16,6 +16,8 @@ pub mod error;
 pub mod ffi;
 #[cfg(feature = "shell")]
 pub mod material;
+#[cfg(feature = "lattice")]
+pub mod lattice;
 pub mod mesh;
 pub mod parallel;
 #[cfg(feature = "shell")]

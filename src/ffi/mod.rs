@@ -7,10 +7,12 @@
 
 pub mod boundary;
 pub mod ccd;
+pub mod lattice;
 pub mod mesh;
 pub mod version;
 
 pub use boundary::SoftshellStatus;
+pub use lattice::{SoftshellLattice, SoftshellLatticeDef, SoftshellLatticeStats};
 pub use mesh::{SoftshellMesh, SoftshellMeshReport};
 pub mod shell;
 pub use shell::{SoftshellAnisotropyDef, SoftshellShell, SoftshellShellDef, SoftshellShellStats};

@@ -1,0 +1,348 @@
+//! One FastLSM step (SPEC 3), parallel over rows on the lattice's own worker pool.
+//!
+//! ```text
+//! 1. moments:  per particle [m~ x', m~ x' x0^T (+ damping moments)], summed along x   (rows in parallel)
+//! 2. fit:      summed along z (row blocks in parallel); per region c, A, R = polar(A), t
+//! 3. spread:   per region [R e_x, R e_z, t (+ rigid motion)], summed along x          (rows in parallel)
+//! 4. update:   summed along z (row blocks in parallel); per particle goal g and
+//!              v += damping (v_rigid - v);  v = keep v + alpha (g - x)/h + h (gravity + f/m);  x += h v
+//!              (keep = 1 - velocity_damping h)
+//! ```
+//! Rows and row blocks are fixed units of work and every reduction runs in block order, so the
+//! result is bit-identical whatever the thread count. The update writes into the `_next`
+//! buffers; they replace the state only when every value is finite and sane, so a diverging step
+//! is rolled back by not swapping (SPEC 4).
+
+use std::time::Instant;
+
+use glam::DVec3;
+
+use super::damping::{
+    DAMPING_FIT_CHANNELS, DAMPING_MOMENT_CHANNELS, damping_moments, region_rigid_motion, rigid_velocity,
+};
+use super::layout::LatticeLayout;
+use super::matching::{
+    FIT_CHANNELS, MOMENT_CHANNELS, RegionRest, RotationColumns, fit_channels, fit_region, goal, particle_moments,
+};
+use super::params::LatticeParams;
+use super::simulator::{Lattice, StepStats};
+use super::summation::{ROW_BLOCK, RowWindow, running_sum_row};
+use crate::error::{Error, ErrorKind, Result};
+use crate::parallel::WorkerPool;
+
+/// Positions and speeds beyond this (m, m/s) count as diverged: far past anything physical, and
+/// still far inside f32 range, so what a caller copies out is always finite.
+const DIVERGENCE_LIMIT: f64 = 1e15;
+
+/// What the passes read.
+struct Passes<'a> {
+    layout: &'a LatticeLayout,
+    rest: &'a [RegionRest],
+    w: usize,
+    damping: bool,
+    moment_channels: usize,
+    fit_channels: usize,
+    origin: [f64; 3],
+}
+
+impl<'a> Passes<'a> {
+    fn new(layout: &'a LatticeLayout, rest: &'a [RegionRest], params: &LatticeParams, x: &[[f64; 3]]) -> Self {
+        let damping = params.damping > 0.0;
+        let origin = x[layout.site_of_particle(0)];
+        Self {
+            layout,
+            rest,
+            w: params.region_half_width as usize,
+            damping,
+            moment_channels: MOMENT_CHANNELS + if damping { DAMPING_MOMENT_CHANNELS } else { 0 },
+            fit_channels: FIT_CHANNELS + if damping { DAMPING_FIT_CHANNELS } else { 0 },
+            origin,
+        }
+    }
+
+    #[inline]
+    fn relative(&self, x: [f64; 3]) -> [f64; 3] {
+        [x[0] - self.origin[0], x[1] - self.origin[1], x[2] - self.origin[2]]
+    }
+
+    /// Pass 1: particle moments, summed along x, into `out` (`moment_channels` per site).
+    fn moments(&self, pool: &WorkerPool, x: &[[f64; 3]], v: &[[f64; 3]], out: &mut [f64]) {
+        let columns = self.layout.columns();
+        let ch = self.moment_channels;
+        pool.for_each_chunk_mut(out, columns * ch, |row, out_row| {
+            let mut q = vec![0.0; columns * ch];
+            for c in 0..columns {
+                let s = row * columns + c;
+                let rest = &self.rest[s];
+                if rest.share == 0.0 {
+                    continue;
+                }
+                let xp = self.relative(x[s]);
+                let q = &mut q[c * ch..(c + 1) * ch];
+                particle_moments(rest.share, xp, self.layout.centred_rest(c, row), &mut q[..MOMENT_CHANNELS]);
+                if self.damping {
+                    damping_moments(rest.share, xp, v[s], &mut q[MOMENT_CHANNELS..]);
+                }
+            }
+            running_sum_row(&q, out_row, ch, self.w);
+        });
+    }
+
+    /// Pass 2: the moments summed along z; every region fitted. Writes the fit channels of each
+    /// region into `fits` and its rotation into `rotation_out`.
+    fn fit(
+        &self,
+        pool: &WorkerPool,
+        moments: &[f64],
+        rotation: &[RotationColumns],
+        fits: &mut [f64],
+        rotation_out: &mut [RotationColumns],
+    ) {
+        let (columns, rows) = (self.layout.columns(), self.layout.rows());
+        let (mc, fc) = (self.moment_channels, self.fit_channels);
+        let spacing_sq = self.layout.spacing() * self.layout.spacing();
+        let mut blocks: Vec<(usize, &mut [f64], &mut [RotationColumns])> = fits
+            .chunks_mut(ROW_BLOCK * columns * fc)
+            .zip(rotation_out.chunks_mut(ROW_BLOCK * columns))
+            .enumerate()
+            .map(|(i, (f, r))| (i, f, r))
+            .collect();
+        pool.for_each_chunk_mut(&mut blocks, 1, |_, block| {
+            for (index, fits, rotation_out) in block.iter_mut() {
+                let k0 = *index * ROW_BLOCK;
+                let mut window = RowWindow::new(moments, columns * mc, rows, self.w, k0);
+                for k in k0..(k0 + ROW_BLOCK).min(rows) {
+                    let sums_row = window.current();
+                    for c in 0..columns {
+                        let s = k * columns + c;
+                        let local = s - k0 * columns;
+                        let out = &mut fits[local * fc..(local + 1) * fc];
+                        let rest = &self.rest[s];
+                        if rest.share == 0.0 {
+                            out.fill(0.0);
+                            rotation_out[local] = rotation[s];
+                            continue;
+                        }
+                        let sums = &sums_row[c * mc..(c + 1) * mc];
+                        // Singular values of A scale as M (w h)^2; far below that, A is zero.
+                        let tiny = 1e-12 * rest.mass * spacing_sq;
+                        let (rot, t, centroid) = fit_region(&sums[..MOMENT_CHANNELS], rest, &rotation[s], tiny);
+                        fit_channels(&rot, t, &mut out[..FIT_CHANNELS]);
+                        rotation_out[local] = rot;
+                        if self.damping {
+                            region_rigid_motion(
+                                &sums[MOMENT_CHANNELS..],
+                                rest.mass,
+                                centroid,
+                                &mut out[FIT_CHANNELS..],
+                            );
+                        }
+                    }
+                    window.advance();
+                }
+            }
+        });
+    }
+
+    /// Pass 3: the region fits summed along x (regions to particles), into `out`.
+    fn spread(&self, pool: &WorkerPool, fits: &[f64], out: &mut [f64]) {
+        let columns = self.layout.columns();
+        let ch = self.fit_channels;
+        pool.for_each_chunk_mut(out, columns * ch, |row, out_row| {
+            running_sum_row(&fits[row * columns * ch..(row + 1) * columns * ch], out_row, ch, self.w);
+        });
+    }
+}
+
+/// One block of rows of the update pass, with its share of the statistics.
+struct UpdateBlock<'a> {
+    index: usize,
+    x: &'a mut [[f64; 3]],
+    v: &'a mut [[f64; 3]],
+    distance_sum: f64,
+    distance_max: f64,
+    kinetic: f64,
+    diverged: Option<(usize, &'static str, f64)>,
+}
+
+impl Lattice {
+    /// Advances the lattice by one time step (SPEC 3). On divergence (a non-finite value, or a
+    /// position or speed beyond 1e15) the state is left as it was before the call and an
+    /// `Unstable` error says which particle blew up and what would be stable.
+    pub fn step(&mut self) -> Result<StepStats> {
+        let start = Instant::now();
+        let passes = Passes::new(&self.layout, &self.rest, &self.params, &self.x);
+        let (columns, rows) = (self.layout.columns(), self.layout.rows());
+        let n = self.layout.site_count();
+        let (mc, fc) = (passes.moment_channels, passes.fit_channels);
+        let moments = &mut self.moments;
+        let fits = &mut self.fits;
+        passes.moments(&self.pool, &self.x, &self.v, &mut moments[..n * mc]);
+        passes.fit(&self.pool, &moments[..n * mc], &self.rotation, fits, &mut self.rotation_next);
+        passes.spread(&self.pool, fits, &mut moments[..n * fc]);
+        let spread = &moments[..n * fc];
+
+        let h = self.params.time_step as f64;
+        let alpha = self.params.stiffness as f64;
+        let damping = self.params.damping as f64;
+        let keep = (1.0 - self.params.velocity_damping as f64 * self.params.time_step as f64).max(0.0);
+        let mass = self.params.particle_mass as f64;
+        let gravity = DVec3::from(self.params.gravity.map(|g| g as f64));
+        let (x, v) = (&self.x, &self.v);
+        let pinned = self.pinned.as_deref();
+        let force = self.force.as_deref();
+        let mut blocks: Vec<UpdateBlock> = self
+            .x_next
+            .chunks_mut(ROW_BLOCK * columns)
+            .zip(self.v_next.chunks_mut(ROW_BLOCK * columns))
+            .enumerate()
+            .map(|(index, (x, v))| UpdateBlock {
+                index,
+                x,
+                v,
+                distance_sum: 0.0,
+                distance_max: 0.0,
+                kinetic: 0.0,
+                diverged: None,
+            })
+            .collect();
+        let passes = &passes;
+        self.pool.for_each_chunk_mut(&mut blocks, 1, |_, block| {
+            for b in block.iter_mut() {
+                let k0 = b.index * ROW_BLOCK;
+                let mut window = RowWindow::new(spread, columns * fc, rows, passes.w, k0);
+                for k in k0..(k0 + ROW_BLOCK).min(rows) {
+                    let sums_row = window.current();
+                    for c in 0..columns {
+                        let s = k * columns + c;
+                        let local = s - k0 * columns;
+                        let rest = &passes.rest[s];
+                        if rest.share == 0.0 {
+                            b.x[local] = x[s];
+                            b.v[local] = v[s];
+                            continue;
+                        }
+                        let sums = &sums_row[c * fc..(c + 1) * fc];
+                        let xp = passes.relative(x[s]);
+                        let g = goal(&sums[..FIT_CHANNELS], passes.layout.centred_rest(c, k), rest.inv_count);
+                        let to_goal = DVec3::from(g) - DVec3::from(xp);
+                        let distance = to_goal.length();
+                        b.distance_sum += distance;
+                        b.distance_max = b.distance_max.max(distance);
+                        if pinned.is_some_and(|p| p[s]) {
+                            b.x[local] = x[s];
+                            b.v[local] = [0.0; 3];
+                            continue;
+                        }
+                        let mut vel = DVec3::from(v[s]);
+                        if passes.damping {
+                            let rigid = rigid_velocity(&sums[FIT_CHANNELS..], xp, rest.inv_count);
+                            vel += (rigid - vel) * damping;
+                        }
+                        // SPEC 3: v += alpha (g - x)/h + h f_ext/m;  x += h v.
+                        let mut accel = gravity;
+                        if let Some(f) = force {
+                            accel += DVec3::from(f[s]) / mass;
+                        }
+                        vel = vel * keep + to_goal * (alpha / h) + accel * h;
+                        let new_x = DVec3::from(x[s]) + vel * h;
+                        b.kinetic += 0.5 * mass * vel.length_squared();
+                        if b.diverged.is_none() {
+                            let speed = vel.length();
+                            let reach = new_x.abs().max_element();
+                            if !(reach <= DIVERGENCE_LIMIT) {
+                                b.diverged = Some((s, "position", reach));
+                            } else if !(speed <= DIVERGENCE_LIMIT) {
+                                b.diverged = Some((s, "speed", speed));
+                            }
+                        }
+                        b.x[local] = new_x.to_array();
+                        b.v[local] = vel.to_array();
+                    }
+                    window.advance();
+                }
+            }
+        });
+
+        let particles = self.layout.particle_count() as f64;
+        let mut stats = StepStats::default();
+        let mut distance_sum = 0.0;
+        for b in &blocks {
+            if let Some((s, what, value)) = b.diverged {
+                return Err(self.divergence_error(s, what, value));
+            }
+            distance_sum += b.distance_sum;
+            stats.max_goal_distance = stats.max_goal_distance.max(b.distance_max);
+            stats.kinetic_energy += b.kinetic;
+        }
+        if !stats.kinetic_energy.is_finite() {
+            return Err(self.divergence_error(self.layout.site_of_particle(0), "kinetic energy", stats.kinetic_energy));
+        }
+        drop(blocks);
+        std::mem::swap(&mut self.x, &mut self.x_next);
+        std::mem::swap(&mut self.v, &mut self.v_next);
+        std::mem::swap(&mut self.rotation, &mut self.rotation_next);
+        if let Some(f) = self.force.as_mut() {
+            f.fill([0.0; 3]);
+        }
+        self.steps += 1;
+        self.time = self.steps as f64 * h;
+        stats.step = self.steps;
+        stats.time = self.time;
+        stats.goal_distance = distance_sum / particles;
+        stats.step_seconds = start.elapsed().as_secs_f64();
+        Ok(stats)
+    }
+
+    fn divergence_error(&self, site: usize, what: &str, value: f64) -> Error {
+        let columns = self.layout.columns();
+        let force = self.force.as_ref().map_or(0.0, |f| DVec3::from(f[site]).length());
+        Error::new(
+            ErrorKind::Unstable,
+            format!(
+                "the lattice step diverged: the {what} of particle (column {}, row {}) became {value:e} \
+                 (limit {DIVERGENCE_LIMIT:e}); the step was rolled back. Shape matching itself is stable for \
+                 stiffness in (0, 1]: the external force on it ({force:e} N on {} kg) or gravity drove it; \
+                 apply a smaller force or use a smaller time_step (now {} s)",
+                site % columns,
+                site / columns,
+                self.params.particle_mass,
+                self.params.time_step
+            ),
+        )
+    }
+
+    /// The goal of every site for the current positions (SPEC 3), world space (holes: zeros).
+    /// Computed with the same passes as [`Lattice::step`], in fresh scratch buffers.
+    pub fn goals(&self) -> Vec<[f64; 3]> {
+        let passes = Passes::new(&self.layout, &self.rest, &self.params, &self.x);
+        let (columns, rows) = (self.layout.columns(), self.layout.rows());
+        let n = self.layout.site_count();
+        let (mc, fc) = (passes.moment_channels, passes.fit_channels);
+        let mut moments = vec![0.0; n * mc];
+        let mut fits = vec![0.0; n * fc];
+        let mut rotation_out = vec![[0.0; 6]; n];
+        passes.moments(&self.pool, &self.x, &self.v, &mut moments);
+        passes.fit(&self.pool, &moments, &self.rotation, &mut fits, &mut rotation_out);
+        let mut spread = vec![0.0; n * fc];
+        passes.spread(&self.pool, &fits, &mut spread);
+        let mut goals = vec![[0.0; 3]; n];
+        for k0 in (0..rows).step_by(ROW_BLOCK) {
+            let mut window = RowWindow::new(&spread, columns * fc, rows, passes.w, k0);
+            for k in k0..(k0 + ROW_BLOCK).min(rows) {
+                for c in 0..columns {
+                    let s = k * columns + c;
+                    let rest = &passes.rest[s];
+                    if rest.share == 0.0 {
+                        continue;
+                    }
+                    let sums = &window.current()[c * fc..c * fc + FIT_CHANNELS];
+                    let g = goal(sums, passes.layout.centred_rest(c, k), rest.inv_count);
+                    goals[s] = [g[0] + passes.origin[0], g[1] + passes.origin[1], g[2] + passes.origin[2]];
+                }
+                window.advance();
+            }
+        }
+        goals
+    }
+}
