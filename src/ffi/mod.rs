@@ -5,9 +5,11 @@
 //! cbindgen reads these files to write `include/softshell.h`, so the doc comments here are
 //! written for C readers.
 
+pub mod body;
 pub mod boundary;
 pub mod mesh;
 pub mod version;
 
+pub use body::{SoftshellBody, SoftshellBodyDef, SoftshellBodyStats};
 pub use boundary::SoftshellStatus;
 pub use mesh::{SoftshellMesh, SoftshellMeshReport};
