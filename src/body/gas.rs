@@ -253,11 +253,6 @@ impl Gas {
         self.measure(x, triangles, new_face_fragment);
     }
 
-    /// Total nRT, J.
-    pub fn total(&self) -> f64 {
-        self.n_rt.iter().sum()
-    }
-
     pub fn memory_bytes(&self) -> usize {
         (self.n_rt.capacity()
             + self.v_min.capacity()

@@ -1,6 +1,7 @@
 //! XPBD substeps (SPEC 2.2): springs as distance constraints `C = |x_j - x_i| - L0` with
 //! compliance `1/K_s` and damping, the gas as a volume constraint whose multiplier is the
-//! pressure impulse, projected by Gauss-Seidel.
+//! pressure impulse, projected by Gauss-Seidel: gas first, then springs (so each sweep ends with
+//! the stiff constraints met), then obstacle contacts.
 //!
 //! Gas: implicit Euler on the energy `-nRT ln V` asks for `p = p̃ + M⁻¹ ∇V λ` with
 //! `λ = h² nRT / V(p)`; each iteration takes one Newton step on `λ - h² nRT / V(p) = 0`,
@@ -10,6 +11,7 @@ use glam::Vec3;
 
 use super::forces::{Model, external_forces};
 use super::gas::Gas;
+use super::obstacles::{Obstacle, project, respond};
 
 /// Scratch of the XPBD integrator (allocated only when it is used).
 #[derive(Default)]
@@ -20,6 +22,9 @@ pub(crate) struct XpbdScratch {
     lambda: Vec<f32>,
     gas_lambda: Vec<f64>,
     gas_norm: Vec<f64>,
+    /// Contact normal of each vertex in this substep (only with obstacles), with the normal
+    /// speed it had before the solve.
+    contact: Vec<Option<(Vec3, f32)>>,
 }
 
 impl XpbdScratch {
@@ -27,6 +32,7 @@ impl XpbdScratch {
         (self.force.capacity() + self.gradient.capacity() + self.previous.capacity()) * 12
             + self.lambda.capacity() * 4
             + (self.gas_lambda.capacity() + self.gas_norm.capacity()) * 8
+            + self.contact.capacity() * std::mem::size_of::<Option<(Vec3, f32)>>()
     }
 }
 
@@ -58,6 +64,7 @@ pub(crate) fn substep(
     v: &mut [Vec3],
     h: f32,
     iterations: u32,
+    obstacles: &[Obstacle],
     s: &mut XpbdScratch,
 ) -> f64 {
     let n = x.len();
@@ -70,6 +77,10 @@ pub(crate) fn substep(
         x[i] += v[i] * h;
     }
     let (ks, kd) = (model.settings.spring_stiffness, model.settings.spring_damping);
+    s.contact.clear();
+    if !obstacles.is_empty() {
+        s.contact.resize(n, None);
+    }
     s.lambda.clear();
     s.lambda.resize(model.springs.len(), 0.0);
     let h2 = (h * h) as f64;
@@ -82,30 +93,6 @@ pub(crate) fn substep(
     let alpha_tilde = if ks > 0.0 { 1.0 / (ks * h * h) } else { f32::INFINITY };
     let gamma = if ks > 0.0 { kd / (ks * h) } else { 0.0 };
     for _ in 0..iterations.max(1) {
-        if ks > 0.0 {
-            for (k, (&[i, j], &rest)) in model.springs.ends.iter().zip(&model.springs.rest).enumerate() {
-                let (i, j) = (i as usize, j as usize);
-                let d = x[j] - x[i];
-                let len = d.length();
-                if len <= 1e-6 * rest {
-                    continue;
-                }
-                let u = d / len;
-                let velocity_term = u.dot((x[j] - s.previous[j]) - (x[i] - s.previous[i]));
-                let dl = distance_delta_lambda(
-                    len - rest,
-                    s.lambda[k],
-                    model.inv_mass[i],
-                    model.inv_mass[j],
-                    alpha_tilde,
-                    gamma,
-                    velocity_term,
-                );
-                s.lambda[k] += dl;
-                x[i] -= u * (model.inv_mass[i] * dl);
-                x[j] += u * (model.inv_mass[j] * dl);
-            }
-        }
         if let Some(gas) = gas.as_deref_mut() {
             gas.measure(x, model.triangles, model.face_fragment);
             gas.volume_gradient(x, model.triangles, model.face_fragment, &mut s.gradient);
@@ -137,9 +124,63 @@ pub(crate) fn substep(
                 }
             }
         }
+        if ks > 0.0 {
+            for (k, (&[i, j], &rest)) in model.springs.ends.iter().zip(&model.springs.rest).enumerate() {
+                let (i, j) = (i as usize, j as usize);
+                let d = x[j] - x[i];
+                let len = d.length();
+                if len <= 1e-6 * rest {
+                    continue;
+                }
+                let u = d / len;
+                let velocity_term = u.dot((x[j] - s.previous[j]) - (x[i] - s.previous[i]));
+                let dl = distance_delta_lambda(
+                    len - rest,
+                    s.lambda[k],
+                    model.inv_mass[i],
+                    model.inv_mass[j],
+                    alpha_tilde,
+                    gamma,
+                    velocity_term,
+                );
+                s.lambda[k] += dl;
+                x[i] -= u * (model.inv_mass[i] * dl);
+                x[j] += u * (model.inv_mass[j] * dl);
+            }
+        }
+        if !obstacles.is_empty() {
+            s.contact.resize(n, None);
+            for i in 0..n {
+                if model.inv_mass[i] > 0.0 {
+                    if let Some(normal) = project(&mut x[i], obstacles) {
+                        if s.contact[i].is_none() {
+                            s.contact[i] = Some((normal, v[i].dot(normal)));
+                        }
+                    }
+                }
+            }
+        }
     }
     for i in 0..n {
         v[i] = (x[i] - s.previous[i]) / h;
+    }
+    if !obstacles.is_empty() {
+        let (restitution, friction) = (model.settings.restitution, model.settings.friction);
+        for i in 0..n {
+            if let Some((normal, vn_before)) = s.contact[i] {
+                // Restitution from the normal speed before the solve; friction on the rest.
+                let vn = v[i].dot(normal);
+                let bounce = (-restitution * vn_before).max(vn);
+                let mut tangential = v[i] - normal * vn;
+                let removed = (bounce - vn_before).max(0.0);
+                let speed = tangential.length();
+                if speed > 0.0 {
+                    tangential *= (1.0 - friction * removed / speed).max(0.0);
+                }
+                v[i] = tangential + normal * bounce;
+                let _ = respond;
+            }
+        }
     }
     power * h as f64
 }
