@@ -20,6 +20,21 @@
 #define SOFTSHELL_ABI_VERSION ((SOFTSHELL_VERSION_MAJOR << 16) | (SOFTSHELL_VERSION_MINOR << 8) | SOFTSHELL_VERSION_PATCH)
 
 
+// Explicit Euler, `x += h v; v += h a` with the old velocity: the paper's integrator. Unstable
+// for stiff springs (`h` above about `2/omega`): such a step returns `SOFTSHELL_STATUS_UNSTABLE`.
+#define SOFTSHELL_INTEGRATOR_EXPLICIT_EULER 0
+
+// Symplectic (semi-implicit) Euler, `v += h a; x += h v`: stable while `h < 2/omega_max`.
+#define SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER 1
+
+// Linearised backward Euler solved by conjugate gradients: stable at any time step, with
+// numerical damping. The default.
+#define SOFTSHELL_INTEGRATOR_IMPLICIT_EULER 2
+
+// XPBD: springs as distance constraints with compliance 1/K_s, gas as a volume constraint;
+// `iterations` Gauss-Seidel sweeps per substep.
+#define SOFTSHELL_INTEGRATOR_XPBD 3
+
 // Mean curvature H (1/m), for `..._copy_vertex_curvature`: positive where the surface bends away
 // from its outward normal (1 everywhere on a unit sphere).
 #define SOFTSHELL_CURVATURE_MEAN 0
@@ -110,6 +125,22 @@ typedef uint32_t SoftshellStatus;
 #endif // __STDC_VERSION__ >= 202311L
 #endif // __cplusplus
 
+// A mass-spring soft body with gas and fracture (SPEC section 2).
+//
+// Created by `softshell_body_new`, destroyed by `softshell_body_free`. Functions:
+// `softshell_body_add_sphere_obstacle`, `_add_plane_obstacle`, `_pin_vertex`,
+// `_apply_impulse`, `_break_edge`, `_step`, `_topology_generation`, `_vertex_count`,
+// `_triangle_count`, `_fragment_count`, `_copy_positions`, `_copy_velocities`, `_copy_masses`,
+// `_copy_triangles`, `_copy_vertex_origins`, `_copy_fragment_ids`, `_memory_bytes`.
+//
+// Fracture appends vertices and rewrites triangles: vertex indices are stable (survivors are
+// never renumbered), but the counts change, so re-query buffer sizes whenever
+// `softshell_body_topology_generation` changes.
+//
+// Thread rules: a body may move between threads; one body must not be used from two threads at
+// once; different bodies may be stepped concurrently.
+typedef struct SoftshellBody SoftshellBody;
+
 // A FastLSM elastic lattice surface (SPEC 3): particles on a 2D lattice with an optional mask
 // of holes, shape-matched in overlapping square regions.
 //
@@ -143,6 +174,99 @@ typedef struct SoftshellMesh SoftshellMesh;
 // Thread rules: a shell may move between threads but must not be used from two threads at
 // once; different shells may be stepped concurrently. Each shell owns its worker threads.
 typedef struct SoftshellShell SoftshellShell;
+
+// Settings of a soft body. Fill with `softshell_body_def_default()`, then edit fields.
+typedef struct SoftshellBodyDef {
+  // Step length h, s, in [1e-6, 1]. Default 1/60.
+  float time_step;
+  // Substeps per step (each h / substeps), in [1, 1000]. Default 1.
+  uint32_t substeps;
+  // `SOFTSHELL_INTEGRATOR_EXPLICIT_EULER` (the paper's) | `_SYMPLECTIC_EULER` |
+  // `_IMPLICIT_EULER` (default) | `_XPBD`.
+  uint32_t integrator;
+  // Total mass, kg, > 0; spread over the vertices in proportion to their share of the area.
+  // Default 1.
+  float total_mass;
+  // Spring stiffness K_s, N/m, in [0, 1e12]: one spring per mesh edge. Default 1000.
+  float spring_stiffness;
+  // Spring damping K_d along each spring, N s/m, in [0, 1e9]. Default 1.
+  float spring_damping;
+  // Amount of gas nRT, J (pressure = nRT / volume), in [0, 1e12]. 0 (default) = no gas; then
+  // open meshes (cloth) are allowed. With gas the mesh must be closed, manifold and outward.
+  float gas_amount;
+  // Gravity, m/s^2. Default 0, -9.81, 0.
+  float gravity[3];
+  // Wind velocity, m/s. Default 0, 0, 0.
+  float wind[3];
+  // Wind drag coefficient, kg/(m^2 s): each face feels `drag ((wind - v)·n) n area`, in
+  // [0, 1e6]. Default 0 (no wind force).
+  float drag;
+  // Spring strain `(length - rest)/rest` above which a spring breaks and the surface cracks,
+  // in [0, 1e6]. 0 (default) = never.
+  float break_strain;
+  // Net force on a vertex, N, above which it is cut out as a core block, in [0, 1e12].
+  // 0 (default) = never.
+  float break_force;
+  // Gas leak through holes, m/(Pa s): `d(nRT)/dt = -leak_rate * hole_area * pressure`, in
+  // [0, 1e6]. Default 0.
+  float leak_rate;
+  // A ground plane y = ground_height (normal +y). Default false.
+  bool ground;
+  // Height of the ground plane, m. Default 0.
+  float ground_height;
+  // Restitution of contacts with the ground and obstacles, in [0, 1]. Default 0.
+  float restitution;
+  // Coulomb friction coefficient of contacts, in [0, 1000]. Default 0.5.
+  float friction;
+  // Worker threads: 0 = one per core, 1 = serial (default), at most 256. Results do not depend
+  // on it.
+  uint32_t threads;
+  // XPBD Gauss-Seidel sweeps per substep; the implicit integrator allows 10 times as many
+  // conjugate-gradient iterations (at least 20). In [1, 1000]. Default 10.
+  uint32_t iterations;
+  // Set by `softshell_body_def_default`; do not touch.
+  uint32_t internal_cookie;
+} SoftshellBodyDef;
+
+// What a step did. Filled by `softshell_body_step`. Fields may be appended in later versions.
+typedef struct SoftshellBodyStats {
+  // Steps taken so far.
+  uint64_t step;
+  // Simulated time, s.
+  double time;
+  // Enclosed volume, m^3: the sum over the pieces that hold gas (holes capped), or the signed
+  // volume of the mesh without gas.
+  double volume;
+  // Mean gas pressure (total nRT / total volume), Pa; 0 without gas.
+  double pressure;
+  // Kinetic energy, J.
+  double kinetic_energy;
+  // Energy error: (kinetic + spring + gas + gravitational energy) minus its initial value and
+  // the work of wind and impulses, J. Damping, contacts and leaks make it negative; a growing
+  // positive value means the integrator is adding energy.
+  double energy_drift;
+  // Springs broken during this step.
+  uint64_t springs_broken;
+  // Core blocks released during this step.
+  uint64_t cores_released;
+  // Bumped on every topology change (re-query buffers when it changes).
+  uint64_t topology_generation;
+  // Vertices now (fracture appends vertices).
+  size_t vertex_count;
+  // Triangles now.
+  size_t triangle_count;
+  // Connected pieces now.
+  size_t fragment_count;
+  // Wall-clock time of the step, s.
+  double step_seconds;
+  // True when a gas volume was clamped during the step (a piece near zero or inverted volume:
+  // its pressure stopped growing).
+  bool volume_clamped;
+  // Largest spring strain at the end of the step.
+  double max_strain;
+  // Conjugate-gradient iterations of the step (implicit Euler), 0 otherwise.
+  uint64_t solver_iterations;
+} SoftshellBodyStats;
 
 // Settings of a lattice, for `softshell_lattice_new`. Always start from
 // `softshell_lattice_def_default()` and edit fields: a def not made by it is refused.
@@ -359,6 +483,194 @@ typedef struct SoftshellShellStats {
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
+
+// The default body def: h = 1/60 s, 1 substep, implicit Euler, 1 kg, K_s = 1000 N/m,
+// K_d = 1 N s/m, no gas, gravity 0,-9.81,0, no wind, no fracture, no ground, restitution 0,
+// friction 0.5, 1 thread, 10 iterations.
+struct SoftshellBodyDef softshell_body_def_default(void);
+
+// Creates a soft body from `mesh` (copied: the mesh may be freed afterwards) and `def`.
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL pointer, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
+// for a def not made by `softshell_body_def_default` or a field out of range (the message names
+// it), `SOFTSHELL_STATUS_INVALID_MESH` when the mesh does not suit (with gas: not closed,
+// manifold and outward; always: a triangle with a repeated corner or an edge of zero length),
+// `SOFTSHELL_STATUS_UNSUPPORTED` when built without the `body` feature. On success
+// `*out_body` receives a new handle to free with `softshell_body_free`; on failure it is left
+// unchanged.
+//
+// # Safety
+// `mesh` must be NULL or a live mesh, `def` NULL or a readable def, `out_body` NULL or writable.
+SoftshellStatus softshell_body_new(const struct SoftshellMesh *mesh,
+                                   const struct SoftshellBodyDef *def,
+                                   struct SoftshellBody **out_body);
+
+// Destroys a body. `softshell_body_free(NULL)` does nothing; freeing twice is undefined
+// behaviour.
+//
+// # Safety
+// `body` must be NULL or a live body that is not used again.
+void softshell_body_free(struct SoftshellBody *body);
+
+// Adds a solid sphere obstacle (centre `center` float[3], m; `radius` > 0, m): vertices are
+// kept outside it with the def's restitution and friction.
+// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius not > 0.
+//
+// # Safety
+// `body` must be NULL or a live body; `center` NULL or three readable floats.
+SoftshellStatus softshell_body_add_sphere_obstacle(struct SoftshellBody *body,
+                                                   const float *center,
+                                                   float radius);
+
+// Adds a half-space obstacle: the plane through `point` (float[3], m) with `normal` (float[3],
+// any non-zero length, pointing to the free side); vertices are kept on the normal's side.
+// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a zero normal.
+//
+// # Safety
+// `body` must be NULL or a live body; `point` and `normal` NULL or three readable floats each.
+SoftshellStatus softshell_body_add_plane_obstacle(struct SoftshellBody *body,
+                                                  const float *point,
+                                                  const float *normal);
+
+// Pins vertex `vertex`: it stays where it is (velocity zero) and no longer responds to forces.
+// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an index out of range.
+//
+// # Safety
+// `body` must be NULL or a live body.
+SoftshellStatus softshell_body_pin_vertex(struct SoftshellBody *body, uint32_t vertex);
+
+// Applies `impulse` (float[3], N s) to vertex `vertex`: its velocity changes by impulse/mass
+// (a pinned vertex ignores it). Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an index out of
+// range or a non-finite impulse.
+//
+// # Safety
+// `body` must be NULL or a live body; `impulse` NULL or three readable floats.
+SoftshellStatus softshell_body_apply_impulse(struct SoftshellBody *body,
+                                             uint32_t vertex,
+                                             const float *impulse);
+
+// Breaks the spring between vertices `a` and `b` by hand (an interactive cut): the same crack
+// as a spring over `break_strain`. The surface opens where a chain of broken edges passes through
+// a vertex (that vertex is split; copies are appended). Bumps the topology generation.
+// Works whatever the break limits are. Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` when an index
+// is out of range or `a` and `b` are not joined by a spring (not an edge, or already broken).
+//
+// # Safety
+// `body` must be NULL or a live body.
+SoftshellStatus softshell_body_break_edge(struct SoftshellBody *body, uint32_t a, uint32_t b);
+
+// Advances the body by one `time_step`: forces, integration (substeps), obstacles, gas leak,
+// then fracture (springs over `break_strain` crack, nodes over `break_force` release core
+// blocks). Writes what happened into `*out_stats` when it is not NULL.
+//
+// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a NaN, or energy growing without a
+// source): the state is rolled back to before the step, `*out_stats` is not written, and the
+// message gives the largest stable time step it estimates.
+//
+// # Safety
+// `body` must be NULL or a live body; `out_stats` NULL or writable.
+SoftshellStatus softshell_body_step(struct SoftshellBody *body,
+                                    struct SoftshellBodyStats *out_stats);
+
+// Topology generation: 0 at creation, bumped by every topology change (a crack, a core block,
+// `softshell_body_break_edge`). When it changes, re-query vertex and triangle counts and
+// buffer sizes. 0 for NULL.
+//
+// # Safety
+// `body` must be NULL or a live body.
+uint64_t softshell_body_topology_generation(const struct SoftshellBody *body);
+
+// Number of vertices now (grows with fracture); 0 for NULL.
+//
+// # Safety
+// `body` must be NULL or a live body.
+size_t softshell_body_vertex_count(const struct SoftshellBody *body);
+
+// Number of triangles now (grows when core blocks are released); 0 for NULL.
+//
+// # Safety
+// `body` must be NULL or a live body.
+size_t softshell_body_triangle_count(const struct SoftshellBody *body);
+
+// Number of connected pieces (fragments) now; 0 for NULL.
+//
+// # Safety
+// `body` must be NULL or a live body.
+size_t softshell_body_fragment_count(const struct SoftshellBody *body);
+
+// Heap bytes held by the body (positions, springs, gas and fracture bookkeeping, scratch);
+// nothing is held for gas without gas, nor for fracture while both break limits are 0 and no
+// edge was broken by hand. 0 for NULL.
+//
+// # Safety
+// `body` must be NULL or a live body.
+size_t softshell_body_memory_bytes(const struct SoftshellBody *body);
+
+// Copies the positions (x,y,z per vertex, `3 * vertex_count` floats, m) into `out`.
+// If `out` is NULL or `capacity` (in floats) is too small, returns
+// `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
+// nothing else. On success `*out_len` is the number of floats written.
+//
+// # Safety
+// `body` must be NULL or a live body; `out` NULL or `capacity` writable floats; `out_len` NULL
+// or writable.
+SoftshellStatus softshell_body_copy_positions(const struct SoftshellBody *body,
+                                              float *out,
+                                              size_t capacity,
+                                              size_t *out_len);
+
+// Copies the velocities (x,y,z per vertex, `3 * vertex_count` floats, m/s) into `out`, with the
+// buffer rules of `softshell_body_copy_positions`.
+//
+// # Safety
+// As `softshell_body_copy_positions`.
+SoftshellStatus softshell_body_copy_velocities(const struct SoftshellBody *body,
+                                               float *out,
+                                               size_t capacity,
+                                               size_t *out_len);
+
+// Copies the vertex masses (one float per vertex, kg; pinned vertices keep theirs) into `out`,
+// with the buffer rules of `softshell_body_copy_positions`. Their sum stays `total_mass`
+// through fracture.
+//
+// # Safety
+// As `softshell_body_copy_positions`.
+SoftshellStatus softshell_body_copy_masses(const struct SoftshellBody *body,
+                                           float *out,
+                                           size_t capacity,
+                                           size_t *out_len);
+
+// Copies the triangles (a,b,c per triangle, `3 * triangle_count` uint32_t, counter-clockwise
+// from outside) into `out`, with the buffer rules of `softshell_body_copy_positions`
+// (capacity and `*out_len` count uint32_t).
+//
+// # Safety
+// As `softshell_body_copy_positions`, with `capacity` writable uint32_t.
+SoftshellStatus softshell_body_copy_triangles(const struct SoftshellBody *body,
+                                              uint32_t *out,
+                                              size_t capacity,
+                                              size_t *out_len);
+
+// Copies, for each vertex, the input-mesh vertex it was split from (one uint32_t per vertex;
+// the identity before any fracture). Vertex indices are stable: fracture appends vertices and
+// never renumbers. Buffer rules of `softshell_body_copy_positions` (counts in uint32_t).
+//
+// # Safety
+// As `softshell_body_copy_triangles`.
+SoftshellStatus softshell_body_copy_vertex_origins(const struct SoftshellBody *body,
+                                                   uint32_t *out,
+                                                   size_t capacity,
+                                                   size_t *out_len);
+
+// Copies, for each triangle, its connected piece (fragment) in `0..fragment_count` (one
+// uint32_t per triangle). Buffer rules of `softshell_body_copy_positions` (counts in uint32_t).
+//
+// # Safety
+// As `softshell_body_copy_triangles`.
+SoftshellStatus softshell_body_copy_fragment_ids(const struct SoftshellBody *body,
+                                                 uint32_t *out,
+                                                 size_t capacity,
+                                                 size_t *out_len);
 
 // Continuous collision of vertex `p` against triangle `abc`, each point moving linearly from
 // its first position (`p0`, `a0`, `b0`, `c0`, at t = 0) to its second (`p1`, `a1`, `b1`, `c1`,

@@ -11,6 +11,8 @@
 #![deny(unsafe_op_in_unsafe_fn)]
 #![warn(missing_docs)]
 
+#[cfg(feature = "body")]
+pub mod body;
 pub mod collision;
 pub mod error;
 pub mod ffi;

@@ -5,12 +5,14 @@
 //! cbindgen reads these files to write `include/softshell.h`, so the doc comments here are
 //! written for C readers.
 
+pub mod body;
 pub mod boundary;
 pub mod ccd;
 pub mod lattice;
 pub mod mesh;
 pub mod version;
 
+pub use body::{SoftshellBody, SoftshellBodyDef, SoftshellBodyStats};
 pub use boundary::SoftshellStatus;
 pub use lattice::{SoftshellLattice, SoftshellLatticeDef, SoftshellLatticeStats};
 pub use mesh::{SoftshellMesh, SoftshellMeshReport};

@@ -21,5 +21,6 @@ pub use measures::{
 pub use obj::{load_obj, save_obj};
 pub use ply::{VertexScalar, save_ply};
 pub use report::{MeshReport, require_closed_oriented_solid};
+pub(crate) use topology::NO_FACE;
 pub use topology::Topology;
 pub use tri_mesh::TriMesh;

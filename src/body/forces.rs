@@ -1,0 +1,76 @@
+//! The force loop (SPEC 2.1, 2.5): gravity, springs with damping, gas pressure and wind, summed
+//! per vertex. Serial scatter in a fixed order, so the sum is the same whatever the thread count.
+
+use glam::Vec3;
+
+use super::gas::Gas;
+use super::settings::BodySettings;
+use super::springs::{Springs, spring_force};
+use super::wind::add_wind;
+
+/// What the force loops read from a body (borrowed for one substep).
+pub(crate) struct Model<'a> {
+    pub settings: &'a BodySettings,
+    pub triangles: &'a [[u32; 3]],
+    pub face_fragment: &'a [u32],
+    pub springs: &'a Springs,
+    pub mass: &'a [f32],
+    pub inv_mass: &'a [f32],
+}
+
+impl Model<'_> {
+    /// True when the wind does anything.
+    pub fn has_wind(&self) -> bool {
+        self.settings.drag > 0.0
+    }
+}
+
+/// Gravity and wind into `f` (overwritten); returns the wind power, W.
+pub(crate) fn external_forces(model: &Model, x: &[Vec3], v: &[Vec3], f: &mut [Vec3]) -> f64 {
+    let g = model.settings.gravity;
+    for (fi, &m) in f.iter_mut().zip(model.mass) {
+        *fi = g * m;
+    }
+    if model.has_wind() { add_wind(x, v, model.triangles, model.settings.wind, model.settings.drag, f) } else { 0.0 }
+}
+
+/// Spring and damping forces added to `f` (SPEC 2.1 eq. 1-2).
+pub(crate) fn add_spring_forces(model: &Model, x: &[Vec3], v: &[Vec3], f: &mut [Vec3]) {
+    let (ks, kd) = (model.settings.spring_stiffness, model.settings.spring_damping);
+    for (&[i, j], &rest) in model.springs.ends.iter().zip(&model.springs.rest) {
+        let (i, j) = (i as usize, j as usize);
+        let force = spring_force(x[i], x[j], v[i], v[j], rest, ks, kd);
+        f[i] += force;
+        f[j] -= force;
+    }
+}
+
+/// Gas pressure forces `P_f ∂V_f/∂x_i` added to `f` (SPEC 2.1 eq. 8-9); measures the gas at `x`
+/// and leaves `∂V/∂x` in `gradient`.
+pub(crate) fn add_gas_forces(model: &Model, gas: &mut Gas, x: &[Vec3], gradient: &mut [Vec3], f: &mut [Vec3]) {
+    gas.measure(x, model.triangles, model.face_fragment);
+    gas.volume_gradient(x, model.triangles, model.face_fragment, gradient);
+    for (i, g) in gradient.iter().enumerate() {
+        let frag = gas.vertex_fragment[i];
+        if frag != u32::MAX {
+            f[i] += *g * gas.pressure[frag as usize] as f32;
+        }
+    }
+}
+
+/// Every force at (x, v) into `f`; returns the wind power.
+pub(crate) fn all_forces(
+    model: &Model,
+    gas: Option<&mut Gas>,
+    x: &[Vec3],
+    v: &[Vec3],
+    gradient: &mut [Vec3],
+    f: &mut [Vec3],
+) -> f64 {
+    let power = external_forces(model, x, v, f);
+    add_spring_forces(model, x, v, f);
+    if let Some(gas) = gas {
+        add_gas_forces(model, gas, x, gradient, f);
+    }
+    power
+}

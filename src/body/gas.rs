@@ -1,0 +1,347 @@
+//! The ideal gas inside each closed fragment (SPEC 2.1, 2.4): exact volume, the conservative
+//! pressure force `P ∂V/∂x`, the volume clamp, hole capping and the leak.
+//!
+//! A fragment's volume is measured over its faces plus a fan cap over each boundary loop (from
+//! the loop's vertex mean), so a cracked fragment still has a volume and the force stays the exact
+//! gradient of it: the cap centre's share of the gradient goes to the loop's vertices equally.
+//! Allocated only when the body has gas.
+
+use glam::{DVec3, Vec3};
+
+/// A boundary loop of a fragment, closed by a fan from the mean of its vertices.
+#[derive(Clone, Debug)]
+pub(crate) struct Cap {
+    pub fragment: u32,
+    pub ring: Vec<u32>,
+}
+
+/// Gas state of every fragment.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Gas {
+    /// nRT of each fragment, J.
+    pub n_rt: Vec<f64>,
+    /// Volume below which the pressure stops growing (the clamp), per fragment, m^3.
+    pub v_min: Vec<f64>,
+    /// Caps over the boundary loops.
+    pub caps: Vec<Cap>,
+    /// Fragment of each vertex (`u32::MAX` for a vertex used by no face).
+    pub vertex_fragment: Vec<u32>,
+    /// A vertex of each fragment, the origin of its volume sums (accuracy only).
+    pub reference_vertex: Vec<u32>,
+    /// Last measured capped volume per fragment, m^3.
+    pub volume: Vec<f64>,
+    /// Last pressure per fragment, Pa (`nRT / max(V, v_min)`).
+    pub pressure: Vec<f64>,
+    /// Area of the caps (the holes) per fragment, m^2.
+    pub open_area: Vec<f64>,
+    /// True when the last measurement clamped a volume (near-zero or inverted fragment).
+    pub clamped: bool,
+}
+
+/// Fraction of a fragment's volume at gas assignment below which the pressure is clamped.
+const CLAMP_FRACTION: f64 = 1e-2;
+
+fn tet(o: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    (a - o).dot((b - o).cross(c - o))
+}
+
+fn ring_center(x: &[Vec3], ring: &[u32]) -> DVec3 {
+    ring.iter().map(|&v| x[v as usize].as_dvec3()).sum::<DVec3>() / ring.len() as f64
+}
+
+impl Gas {
+    /// Builds the fragment bookkeeping for `fragment_count` fragments (`face_fragment` per face)
+    /// and the caps over `boundary_loops`; gas amounts are left at zero.
+    pub fn new(
+        vertex_count: usize,
+        triangles: &[[u32; 3]],
+        face_fragment: &[u32],
+        fragment_count: usize,
+        boundary_loops: &[Vec<u32>],
+    ) -> Self {
+        let mut vertex_fragment = vec![u32::MAX; vertex_count];
+        let mut reference_vertex = vec![u32::MAX; fragment_count];
+        for (t, &frag) in triangles.iter().zip(face_fragment) {
+            for &v in t {
+                vertex_fragment[v as usize] = frag;
+            }
+            if reference_vertex[frag as usize] == u32::MAX {
+                reference_vertex[frag as usize] = t[0];
+            }
+        }
+        let caps = boundary_loops
+            .iter()
+            .filter(|ring| ring.len() >= 3)
+            // A boundary loop runs with its faces' winding; the cap closing it runs against it.
+            .map(|ring| Cap { fragment: vertex_fragment[ring[0] as usize], ring: ring.iter().rev().copied().collect() })
+            .collect();
+        Self {
+            n_rt: vec![0.0; fragment_count],
+            v_min: vec![0.0; fragment_count],
+            caps,
+            vertex_fragment,
+            reference_vertex,
+            volume: vec![0.0; fragment_count],
+            pressure: vec![0.0; fragment_count],
+            open_area: vec![0.0; fragment_count],
+            clamped: false,
+        }
+    }
+
+    pub fn fragment_count(&self) -> usize {
+        self.n_rt.len()
+    }
+
+    /// Sets a fragment's gas so that its pressure is `n_rt / volume` from now on; the clamp is a
+    /// fixed fraction of `volume`.
+    pub fn assign(&mut self, fragment: usize, n_rt: f64, volume: f64) {
+        self.n_rt[fragment] = n_rt;
+        self.v_min[fragment] = CLAMP_FRACTION * volume.max(0.0);
+    }
+
+    /// SPEC 2.1/2.4: capped volume and hole area of every fragment, then the pressure
+    /// `P = nRT / max(V, v_min)` (SPEC 2.2 clamp; `clamped` reports it).
+    pub fn measure(&mut self, x: &[Vec3], triangles: &[[u32; 3]], face_fragment: &[u32]) {
+        let n = self.fragment_count();
+        let origin: Vec<DVec3> = self
+            .reference_vertex
+            .iter()
+            .map(|&v| if v == u32::MAX { DVec3::ZERO } else { x[v as usize].as_dvec3() })
+            .collect();
+        let mut six_v = vec![0.0f64; n];
+        for (t, &frag) in triangles.iter().zip(face_fragment) {
+            let o = origin[frag as usize];
+            six_v[frag as usize] +=
+                tet(o, x[t[0] as usize].as_dvec3(), x[t[1] as usize].as_dvec3(), x[t[2] as usize].as_dvec3());
+        }
+        let mut open = vec![0.0f64; n];
+        for cap in &self.caps {
+            let f = cap.fragment as usize;
+            let (o, c) = (origin[f], ring_center(x, &cap.ring));
+            for (k, &a) in cap.ring.iter().enumerate() {
+                let b = cap.ring[(k + 1) % cap.ring.len()];
+                let (pa, pb) = (x[a as usize].as_dvec3(), x[b as usize].as_dvec3());
+                six_v[f] += tet(o, c, pa, pb);
+                open[f] += 0.5 * (pa - c).cross(pb - c).length();
+            }
+        }
+        self.clamped = false;
+        for f in 0..n {
+            let volume = six_v[f] / 6.0;
+            self.volume[f] = volume;
+            self.open_area[f] = open[f];
+            if self.n_rt[f] <= 0.0 {
+                self.pressure[f] = 0.0;
+                continue;
+            }
+            if volume < self.v_min[f] {
+                self.clamped = true;
+            }
+            self.pressure[f] = self.n_rt[f] / volume.max(self.v_min[f]).max(f64::MIN_POSITIVE);
+        }
+    }
+
+    /// Writes `∂V_f/∂x_i` into `out[i]` for every vertex i (f its fragment; 0 for vertices of
+    /// fragments without gas). Exact for the capped volume (SPEC 2.1: `= (1/3) Σ A_f n_f` on a
+    /// closed mesh).
+    pub fn volume_gradient(&self, x: &[Vec3], triangles: &[[u32; 3]], face_fragment: &[u32], out: &mut [Vec3]) {
+        out.iter_mut().for_each(|g| *g = Vec3::ZERO);
+        let origin = |f: usize| {
+            let v = self.reference_vertex[f];
+            if v == u32::MAX { DVec3::ZERO } else { x[v as usize].as_dvec3() }
+        };
+        for (t, &frag) in triangles.iter().zip(face_fragment) {
+            if self.n_rt[frag as usize] <= 0.0 {
+                continue;
+            }
+            let o = origin(frag as usize);
+            let p = t.map(|v| x[v as usize].as_dvec3() - o);
+            // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
+            out[t[0] as usize] += (p[1].cross(p[2]) / 6.0).as_vec3();
+            out[t[1] as usize] += (p[2].cross(p[0]) / 6.0).as_vec3();
+            out[t[2] as usize] += (p[0].cross(p[1]) / 6.0).as_vec3();
+        }
+        for cap in &self.caps {
+            let f = cap.fragment as usize;
+            if self.n_rt[f] <= 0.0 {
+                continue;
+            }
+            let o = origin(f);
+            let c = ring_center(x, &cap.ring) - o;
+            let share = 1.0 / cap.ring.len() as f64;
+            let mut grad_c = DVec3::ZERO;
+            for (k, &a) in cap.ring.iter().enumerate() {
+                let b = cap.ring[(k + 1) % cap.ring.len()];
+                let (pa, pb) = (x[a as usize].as_dvec3() - o, x[b as usize].as_dvec3() - o);
+                grad_c += pa.cross(pb) / 6.0;
+                out[a as usize] += (pb.cross(c) / 6.0).as_vec3();
+                out[b as usize] += (c.cross(pa) / 6.0).as_vec3();
+            }
+            for &a in &cap.ring {
+                out[a as usize] += (grad_c * share).as_vec3();
+            }
+        }
+    }
+
+    /// Gas energy `Σ_f -nRT ln V` (continued linearly below the clamp, matching the clamped
+    /// force), J.
+    pub fn energy(&self) -> f64 {
+        (0..self.fragment_count())
+            .filter(|&f| self.n_rt[f] > 0.0)
+            .map(|f| {
+                let (v, vmin) = (self.volume[f], self.v_min[f].max(f64::MIN_POSITIVE));
+                if v >= vmin {
+                    -self.n_rt[f] * v.ln()
+                } else {
+                    -self.n_rt[f] * vmin.ln() - self.pressure[f] * (v - vmin)
+                }
+            })
+            .sum()
+    }
+
+    /// SPEC 2.4 leak: `d(nRT)/dt = -leak_rate A_open (P - P_ext)` with `P_ext = 0` (the gas
+    /// pressure is a gauge pressure), integrated exactly over `h`:
+    /// `nRT *= exp(-h leak_rate A_open / V)`.
+    pub fn leak(&mut self, h: f64, leak_rate: f64) {
+        for f in 0..self.fragment_count() {
+            if self.n_rt[f] > 0.0 && self.open_area[f] > 0.0 {
+                let v = self.volume[f].max(self.v_min[f]).max(f64::MIN_POSITIVE);
+                self.n_rt[f] *= (-h * leak_rate * self.open_area[f] / v).exp();
+            }
+        }
+    }
+
+    /// Hands the gas of the fragments before a topology change to those after it: each new
+    /// fragment's parent is the old fragment of its first surviving face, and a parent's nRT is
+    /// split between its children in proportion to their (capped) volumes, so the pressure does
+    /// not jump. Children with no volume (open shreds) get no gas.
+    pub fn inherit(
+        &mut self,
+        old_n_rt: &[f64],
+        old_face_fragment: &[u32],
+        new_face_fragment: &[u32],
+        x: &[Vec3],
+        triangles: &[[u32; 3]],
+    ) {
+        let n = self.fragment_count();
+        let mut parent = vec![u32::MAX; n];
+        for (face, &frag) in new_face_fragment.iter().enumerate() {
+            if parent[frag as usize] == u32::MAX && face < old_face_fragment.len() {
+                parent[frag as usize] = old_face_fragment[face];
+            }
+        }
+        // Volumes of the new fragments with a unit gas so that measure() fills them.
+        self.n_rt.iter_mut().for_each(|g| *g = 1.0);
+        self.v_min.iter_mut().for_each(|v| *v = 0.0);
+        self.measure(x, triangles, new_face_fragment);
+        let mut total = vec![0.0f64; old_n_rt.len()];
+        for f in 0..n {
+            if parent[f] != u32::MAX {
+                total[parent[f] as usize] += self.volume[f].max(0.0);
+            }
+        }
+        for f in 0..n {
+            let (gas, volume) = match parent[f] {
+                p if p != u32::MAX && total[p as usize] > 0.0 => {
+                    let v = self.volume[f].max(0.0);
+                    (old_n_rt[p as usize] * v / total[p as usize], v)
+                }
+                _ => (0.0, 0.0),
+            };
+            self.assign(f, gas, volume);
+        }
+        self.measure(x, triangles, new_face_fragment);
+    }
+
+    pub fn memory_bytes(&self) -> usize {
+        (self.n_rt.capacity()
+            + self.v_min.capacity()
+            + self.volume.capacity()
+            + self.pressure.capacity()
+            + self.open_area.capacity())
+            * 8
+            + (self.vertex_fragment.capacity() + self.reference_vertex.capacity()) * 4
+            + self.caps.iter().map(|c| c.ring.capacity() * 4 + std::mem::size_of::<Cap>()).sum::<usize>()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tetra() -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        (vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z], vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    }
+
+    #[test]
+    fn closed_volume_and_gradient_match_finite_differences() {
+        let (mut x, t) = tetra();
+        let ff = vec![0; 4];
+        let mut gas = Gas::new(4, &t, &ff, 1, &[]);
+        gas.assign(0, 1.0, 1.0 / 6.0);
+        gas.measure(&x, &t, &ff);
+        assert!((gas.volume[0] - 1.0 / 6.0).abs() < 1e-7);
+        let mut g = vec![Vec3::ZERO; 4];
+        gas.volume_gradient(&x, &t, &ff, &mut g);
+        check_gradient(&mut gas, &mut x, &t, &ff, &g);
+    }
+
+    fn check_gradient(gas: &mut Gas, x: &mut [Vec3], t: &[[u32; 3]], ff: &[u32], g: &[Vec3]) {
+        let h = 1e-3f32;
+        for v in 0..x.len() {
+            for axis in 0..3 {
+                let keep = x[v];
+                x[v][axis] += h;
+                gas.measure(x, t, ff);
+                let plus = gas.volume[0];
+                x[v] = keep;
+                x[v][axis] -= h;
+                gas.measure(x, t, ff);
+                let minus = gas.volume[0];
+                x[v] = keep;
+                let fd = (plus - minus) / (2.0 * h as f64);
+                assert!((fd - g[v][axis] as f64).abs() < 1e-4, "vertex {v} axis {axis}: {fd} vs {}", g[v][axis]);
+            }
+        }
+    }
+
+    #[test]
+    fn capped_open_mesh_has_the_closed_volume_and_an_exact_gradient() {
+        // A square pyramid without its base: the cap closes it.
+        let mut x = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 1.0),
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(0.5, 1.0, 0.5),
+        ];
+        let t = vec![[0, 4, 1], [1, 4, 2], [2, 4, 3], [3, 4, 0]];
+        let ff = vec![0; 4];
+        let topo = crate::mesh::Topology::build(&t, 5);
+        let mut gas = Gas::new(5, &t, &ff, 1, &topo.boundary_loops);
+        gas.assign(0, 2.0, 1.0 / 3.0);
+        gas.measure(&x, &t, &ff);
+        assert!((gas.volume[0] - 1.0 / 3.0).abs() < 1e-6, "{}", gas.volume[0]);
+        assert!((gas.open_area[0] - 1.0).abs() < 1e-6);
+        assert!((gas.pressure[0] - 6.0).abs() < 1e-4);
+        x[1].y += 0.1; // make the cap non-planar
+        let mut g = vec![Vec3::ZERO; 5];
+        gas.volume_gradient(&x, &t, &ff, &mut g);
+        check_gradient(&mut gas, &mut x, &t, &ff, &g);
+    }
+
+    #[test]
+    fn clamp_and_leak() {
+        let (mut x, t) = tetra();
+        let ff = vec![0; 4];
+        let mut gas = Gas::new(4, &t, &ff, 1, &[]);
+        gas.assign(0, 1.0, 1.0 / 6.0);
+        x[3] = Vec3::new(0.0, 0.0, -0.5); // inverted
+        gas.measure(&x, &t, &ff);
+        assert!(gas.clamped && gas.pressure[0].is_finite() && gas.pressure[0] > 0.0);
+        assert!(gas.energy().is_finite());
+        gas.open_area[0] = 1.0;
+        gas.leak(1.0, 1.0);
+        assert!(gas.n_rt[0] < 1.0 && gas.n_rt[0] >= 0.0);
+    }
+}

@@ -1,0 +1,224 @@
+//! Linearised backward Euler (SPEC 2.2), solved by matrix-free preconditioned conjugate
+//! gradients: `(M - h² K - h D) Δv = h f + h² K v`, then `v += Δv`, `x += h v`.
+//!
+//! K holds each spring's stiffness block `a I + b u uᵀ` (transverse part clamped at zero when
+//! compressed, so the system is positive definite) and the rank-one gas term
+//! `-(P/V) ∂V/∂x ∂V/∂xᵀ` of `∂(P ∂V/∂x)/∂x` (the indefinite `P ∂²V/∂x²` part is left out);
+//! D is the spring damping `K_d u uᵀ`. Pinned vertices are filtered out of the system.
+
+use glam::Vec3;
+
+use super::forces::{Model, all_forces};
+use super::gas::Gas;
+use super::springs::spring_block;
+
+/// Scratch of the implicit integrator (allocated only when it is used).
+#[derive(Default)]
+pub(crate) struct ImplicitScratch {
+    pub force: Vec<Vec3>,
+    pub gradient: Vec<Vec3>,
+    /// Per spring `(α, β, u)`: the system block `α I + β u uᵀ`.
+    blocks: Vec<(f32, f32, Vec3)>,
+    rhs: Vec<Vec3>,
+    dv: Vec<Vec3>,
+    r: Vec<Vec3>,
+    z: Vec<Vec3>,
+    p: Vec<Vec3>,
+    ap: Vec<Vec3>,
+    diag: Vec<Vec3>,
+    /// Per fragment `h² P/V` (gas rank-one term) and a per-fragment dot product buffer.
+    gas_coef: Vec<f64>,
+    gas_dot: Vec<f64>,
+}
+
+impl ImplicitScratch {
+    pub fn memory_bytes(&self) -> usize {
+        (self.force.capacity()
+            + self.gradient.capacity()
+            + self.rhs.capacity()
+            + self.dv.capacity()
+            + self.r.capacity()
+            + self.z.capacity()
+            + self.p.capacity()
+            + self.ap.capacity()
+            + self.diag.capacity())
+            * 12
+            + self.blocks.capacity() * 20
+            + (self.gas_coef.capacity() + self.gas_dot.capacity()) * 8
+    }
+}
+
+/// Relative residual at which conjugate gradients stop.
+const CG_TOLERANCE: f32 = 1e-5;
+
+fn apply(model: &Model, gas: Option<&Gas>, s: &ImplicitScratch, input: &[Vec3], out: &mut [Vec3], gas_dot: &mut [f64]) {
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = input[i] * model.mass[i];
+    }
+    for (&[i, j], &(alpha, beta, u)) in model.springs.ends.iter().zip(&s.blocks) {
+        let (i, j) = (i as usize, j as usize);
+        let d = input[i] - input[j];
+        let y = d * alpha + u * (beta * u.dot(d));
+        out[i] += y;
+        out[j] -= y;
+    }
+    if let Some(gas) = gas {
+        gas_dot.iter_mut().for_each(|d| *d = 0.0);
+        for (i, g) in s.gradient.iter().enumerate() {
+            let f = gas.vertex_fragment[i];
+            if f != u32::MAX {
+                gas_dot[f as usize] += g.dot(input[i]) as f64;
+            }
+        }
+        for (i, g) in s.gradient.iter().enumerate() {
+            let f = gas.vertex_fragment[i];
+            if f != u32::MAX && s.gas_coef[f as usize] != 0.0 {
+                out[i] += *g * (s.gas_coef[f as usize] * gas_dot[f as usize]) as f32;
+            }
+        }
+    }
+    // Pinned vertices are not unknowns.
+    for (o, &w) in out.iter_mut().zip(model.inv_mass) {
+        if w == 0.0 {
+            *o = Vec3::ZERO;
+        }
+    }
+}
+
+fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
+    a.iter().zip(b).map(|(a, b)| a.dot(*b) as f64).sum()
+}
+
+/// One substep of length `h`; returns (wind work in J, conjugate-gradient iterations).
+pub(crate) fn substep(
+    model: &Model,
+    mut gas: Option<&mut Gas>,
+    x: &mut [Vec3],
+    v: &mut [Vec3],
+    h: f32,
+    max_iterations: usize,
+    s: &mut ImplicitScratch,
+) -> (f64, usize) {
+    let n = x.len();
+    for buffer in [&mut s.force, &mut s.rhs, &mut s.dv, &mut s.r, &mut s.z, &mut s.p, &mut s.ap, &mut s.diag] {
+        buffer.resize(n, Vec3::ZERO);
+    }
+    if gas.is_some() {
+        s.gradient.resize(n, Vec3::ZERO);
+    }
+    let power = all_forces(model, gas.as_deref_mut(), x, v, &mut s.gradient, &mut s.force);
+    let (ks, kd) = (model.settings.spring_stiffness, model.settings.spring_damping);
+    let h2 = h * h;
+
+    // Right side h f + h² K v, spring blocks and the Jacobi preconditioner.
+    s.blocks.clear();
+    for (i, rhs) in s.rhs.iter_mut().enumerate() {
+        *rhs = s.force[i] * h;
+        s.diag[i] = Vec3::splat(model.mass[i]);
+    }
+    for (&[i, j], &rest) in model.springs.ends.iter().zip(&model.springs.rest) {
+        let (i, j) = (i as usize, j as usize);
+        let (a, b, u) = spring_block(x[i], x[j], rest, ks);
+        // h² K v at i: h² B (v_j - v_i)
+        let dvel = v[j] - v[i];
+        let kv = (dvel * a + u * (b * u.dot(dvel))) * h2;
+        s.rhs[i] += kv;
+        s.rhs[j] -= kv;
+        let (alpha, beta) = (h2 * a, h2 * b + h * kd);
+        s.blocks.push((alpha, beta, u));
+        let d = Vec3::splat(alpha) + u * u * beta;
+        s.diag[i] += d;
+        s.diag[j] += d;
+    }
+    if let Some(gas) = gas.as_deref() {
+        let frags = gas.fragment_count();
+        s.gas_coef.clear();
+        s.gas_coef.extend((0..frags).map(|f| {
+            let vol = gas.volume[f].max(gas.v_min[f]);
+            if gas.pressure[f] > 0.0 && vol > 0.0 { (h2 as f64) * gas.pressure[f] / vol } else { 0.0 }
+        }));
+        s.gas_dot.resize(frags, 0.0);
+        s.gas_dot.fill(0.0);
+        for (i, g) in s.gradient.iter().enumerate() {
+            let f = gas.vertex_fragment[i];
+            if f != u32::MAX {
+                s.gas_dot[f as usize] += g.dot(v[i]) as f64;
+                s.diag[i] += *g * *g * s.gas_coef[f as usize] as f32;
+            }
+        }
+        for (i, g) in s.gradient.iter().enumerate() {
+            let f = gas.vertex_fragment[i];
+            if f != u32::MAX {
+                // -h² (P/V) g (g·v)
+                s.rhs[i] -= *g * (s.gas_coef[f as usize] * s.gas_dot[f as usize]) as f32;
+            }
+        }
+    }
+    for i in 0..n {
+        if model.inv_mass[i] == 0.0 {
+            s.rhs[i] = Vec3::ZERO;
+        }
+    }
+
+    // Preconditioned conjugate gradients, started from the free-fall guess Δv = h g: it solves
+    // the rigid translation exactly, the mode that a Jacobi preconditioner dominated by stiff
+    // springs resolves worst.
+    let g = model.settings.gravity * h;
+    for i in 0..n {
+        s.dv[i] = if model.inv_mass[i] == 0.0 { Vec3::ZERO } else { g };
+    }
+    let mut ap = std::mem::take(&mut s.ap);
+    let mut gas_dot = std::mem::take(&mut s.gas_dot);
+    apply(model, gas.as_deref(), s, &s.dv, &mut ap, &mut gas_dot);
+    s.ap = ap;
+    s.gas_dot = gas_dot;
+    for i in 0..n {
+        s.r[i] = s.rhs[i] - s.ap[i];
+    }
+    for i in 0..n {
+        s.z[i] = s.r[i] / s.diag[i].max(Vec3::splat(f32::MIN_POSITIVE));
+    }
+    s.p.copy_from_slice(&s.z);
+    let mut rz = dot(&s.r, &s.z);
+    let r0 = dot(&s.rhs, &s.rhs).sqrt();
+    let mut gas_dot = std::mem::take(&mut s.gas_dot);
+    let mut iterations = 0;
+    if r0 > 0.0 {
+        while iterations < max_iterations {
+            iterations += 1;
+            let mut ap = std::mem::take(&mut s.ap);
+            apply(model, gas.as_deref(), s, &s.p, &mut ap, &mut gas_dot);
+            s.ap = ap;
+            let pap = dot(&s.p, &s.ap);
+            if pap <= 0.0 || !pap.is_finite() {
+                break;
+            }
+            let alpha = (rz / pap) as f32;
+            for i in 0..n {
+                s.dv[i] += s.p[i] * alpha;
+                s.r[i] -= s.ap[i] * alpha;
+            }
+            if dot(&s.r, &s.r).sqrt() <= CG_TOLERANCE as f64 * r0 {
+                break;
+            }
+            for i in 0..n {
+                s.z[i] = s.r[i] / s.diag[i].max(Vec3::splat(f32::MIN_POSITIVE));
+            }
+            let rz_next = dot(&s.r, &s.z);
+            let beta = (rz_next / rz) as f32;
+            rz = rz_next;
+            for i in 0..n {
+                s.p[i] = s.z[i] + s.p[i] * beta;
+            }
+        }
+    }
+    s.gas_dot = gas_dot;
+    for i in 0..n {
+        if model.inv_mass[i] == 0.0 {
+            continue;
+        }
+        v[i] += s.dv[i];
+        x[i] += v[i] * h;
+    }
+    (power * h as f64, iterations)
+}

@@ -1,0 +1,33 @@
+//! The mass-spring soft body with gas and fracture (SPEC section 2).
+//!
+//! Vertices are mass points, mesh edges are damped springs, a closed body holds an ideal gas, and
+//! over-strained springs crack the surface (virtual nodes by fan splitting, SPEC 2.4) while
+//! over-loaded nodes release core blocks. Design:
+//! - rest data (spring ends and rest lengths) in flat arrays, evolving state (x, v, masses) as
+//!   structure-of-arrays in [`Body`];
+//! - each force is a pure kernel with a finite-difference test (`springs`, `gas`, `wind`);
+//! - one file per integrator (`explicit`, `implicit`, `xpbd`), all driven by [`Body::step`];
+//! - topology changes (`crack`, `core_block`) run at one point of the step, after integration and
+//!   outside every parallel loop, then `surface` rebuilds what they invalidated and bumps the
+//!   generation.
+//!
+//! This module knows nothing of the C ABI.
+
+mod core_block;
+mod crack;
+mod energy;
+mod explicit;
+mod forces;
+mod gas;
+mod implicit;
+mod obstacles;
+mod settings;
+mod simulator;
+mod springs;
+mod surface;
+mod wind;
+mod xpbd;
+
+pub use obstacles::Obstacle;
+pub use settings::{BodySettings, Integrator};
+pub use simulator::{Body, BodyStats};

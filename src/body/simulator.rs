@@ -1,0 +1,718 @@
+//! [`Body`]: the soft body's state and its step (SPEC 2.5): forces and integration per substep,
+//! obstacles, the divergence check with rollback, the gas leak, then fracture at one point, after
+//! which springs, fragments and gas are rebuilt and the topology generation bumps.
+
+use std::time::Instant;
+
+use glam::Vec3;
+
+use super::core_block;
+use super::crack;
+use super::energy;
+use super::explicit::{self, ExplicitScratch};
+use super::forces::{Model, add_gas_forces, add_spring_forces};
+use super::gas::Gas;
+use super::implicit::{self, ImplicitScratch};
+use super::obstacles::{Obstacle, resolve};
+use super::settings::{BodySettings, Integrator};
+use super::springs::{Springs, spring_strain};
+use super::surface::{Fracture, Nodes, build_springs};
+use super::wind::add_wind;
+use super::xpbd::{self, XpbdScratch};
+use crate::error::{Error, ErrorKind, Result};
+use crate::mesh::{Topology, TriMesh, require_closed_oriented_solid};
+use crate::parallel::WorkerPool;
+
+/// What one step did (the Rust side of `SoftshellBodyStats`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BodyStats {
+    /// Steps taken so far.
+    pub step: u64,
+    /// Simulated time, s.
+    pub time: f64,
+    /// Total (capped) volume of the fragments with gas, or the signed volume without gas, m^3.
+    pub volume: f64,
+    /// Mean gas pressure `Σ nRT / Σ V` over the fragments with gas, Pa.
+    pub pressure: f64,
+    /// Kinetic energy, J.
+    pub kinetic_energy: f64,
+    /// `(E_kin + E_spring + E_gas + E_grav) - (its initial value + work of external forces)`, J.
+    pub energy_drift: f64,
+    /// Springs broken during this step.
+    pub springs_broken: u64,
+    /// Core blocks released during this step.
+    pub cores_released: u64,
+    /// Bumped on every topology change.
+    pub topology_generation: u64,
+    /// Vertices now.
+    pub vertex_count: usize,
+    /// Triangles now.
+    pub triangle_count: usize,
+    /// Connected pieces now.
+    pub fragment_count: usize,
+    /// Wall time of the step, s.
+    pub step_seconds: f64,
+    /// True when a gas volume was clamped (near zero or inverted) during the step.
+    pub volume_clamped: bool,
+    /// Largest spring strain at the end of the step.
+    pub max_strain: f64,
+    /// Conjugate-gradient iterations (implicit Euler) summed over the substeps.
+    pub solver_iterations: u64,
+}
+
+struct EnergyParts {
+    kinetic: f64,
+    spring: f64,
+    gravity: f64,
+    gas: f64,
+}
+
+impl EnergyParts {
+    fn total(&self) -> f64 {
+        self.kinetic + self.spring + self.gravity + self.gas
+    }
+}
+
+enum Scratch {
+    Explicit(ExplicitScratch),
+    Implicit(ImplicitScratch),
+    Xpbd(XpbdScratch),
+}
+
+impl Scratch {
+    fn memory_bytes(&self) -> usize {
+        match self {
+            Scratch::Explicit(s) => (s.force.capacity() + s.gradient.capacity()) * 12,
+            Scratch::Implicit(s) => s.memory_bytes(),
+            Scratch::Xpbd(s) => s.memory_bytes(),
+        }
+    }
+}
+
+/// A mass-spring soft body with gas and fracture.
+pub struct Body {
+    settings: BodySettings,
+    pool: WorkerPool,
+    nodes: Nodes,
+    saved_x: Vec<Vec3>,
+    saved_v: Vec<Vec3>,
+    /// Wind force and positions at the start of a substep (only with wind), for its work.
+    wind_force: Vec<Vec3>,
+    wind_start: Vec<Vec3>,
+    triangles: Vec<[u32; 3]>,
+    face_fragment: Vec<u32>,
+    fragment_count: usize,
+    springs: Springs,
+    gas: Option<Gas>,
+    fracture: Option<Fracture>,
+    obstacles: Vec<Obstacle>,
+    scratch: Scratch,
+    steps: u64,
+    time: f64,
+    generation: u64,
+    external_work: f64,
+    energy_start: f64,
+    last: BodyStats,
+}
+
+fn triangle_area(x: &[Vec3], t: [u32; 3]) -> f64 {
+    let p = t.map(|i| x[i as usize].as_dvec3());
+    0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length()
+}
+
+impl Body {
+    /// Makes a body from `mesh` (with its `topology`). With gas the mesh must be a closed,
+    /// manifold, outward-oriented solid; without gas any mesh whose triangles have three distinct
+    /// corners and whose edges have a length will do (cloth).
+    pub fn new(mesh: &TriMesh, topology: &Topology, settings: BodySettings) -> Result<Self> {
+        let x = mesh.positions().to_vec();
+        let triangles = mesh.triangles().to_vec();
+        if let Some((t, tri)) = triangles.iter().enumerate().find(|(_, t)| t[0] == t[1] || t[1] == t[2] || t[0] == t[2])
+        {
+            return Err(Error::invalid_mesh(format!(
+                "a soft body needs triangles with three distinct corners: triangle {t} is ({}, {}, {})",
+                tri[0], tri[1], tri[2]
+            )));
+        }
+        if let Some(&[a, b]) = topology.edges.iter().find(|&&[a, b]| x[a as usize] == x[b as usize]) {
+            return Err(Error::invalid_mesh(format!(
+                "a soft body needs springs with a rest length: vertices {a} and {b} of an edge are at the same place"
+            )));
+        }
+        if settings.gas_amount > 0.0 {
+            require_closed_oriented_solid(mesh, topology, "a body with gas (gas_amount > 0)")?;
+        }
+        let n = x.len();
+        // Masses by area: m_i = M (Σ_{f∋i} A_f / 3) / A.
+        let mut lumped = vec![0.0f64; n];
+        for t in &triangles {
+            let a = triangle_area(&x, *t) / 3.0;
+            for &i in t {
+                lumped[i as usize] += a;
+            }
+        }
+        let area: f64 = lumped.iter().sum();
+        if area <= 0.0 {
+            return Err(Error::invalid_mesh("a soft body needs a mesh with a surface area above zero"));
+        }
+        let mass: Vec<f32> = lumped.iter().map(|&a| (settings.total_mass as f64 * a / area) as f32).collect();
+        let inv_mass = mass.iter().map(|&m| if m > 0.0 { 1.0 / m } else { 0.0 }).collect();
+        let nodes = Nodes { v: vec![Vec3::ZERO; n], rest: x.clone(), x, mass, inv_mass };
+        let springs = build_springs(topology, None, &nodes.rest);
+        let face_fragment = topology.face_components.clone();
+        let fragment_count = topology.component_count;
+        let gas = (settings.gas_amount > 0.0).then(|| {
+            let mut gas = Gas::new(n, &triangles, &face_fragment, fragment_count, &topology.boundary_loops);
+            gas.measure(&nodes.x, &triangles, &face_fragment); // n_rt = 0: volumes only
+            let total: f64 = gas.volume.iter().map(|v| v.max(0.0)).sum();
+            for f in 0..fragment_count {
+                let v = gas.volume[f].max(0.0);
+                gas.assign(f, settings.gas_amount as f64 * v / total, v);
+            }
+            gas
+        });
+        let fracture = settings.fracture_enabled().then(|| Fracture::new(n, triangles.len()));
+        let mut obstacles = Vec::new();
+        if settings.ground {
+            obstacles.push(Obstacle::Plane { point: Vec3::new(0.0, settings.ground_height, 0.0), normal: Vec3::Y });
+        }
+        let scratch = match settings.integrator {
+            Integrator::ExplicitEuler | Integrator::SymplecticEuler => Scratch::Explicit(ExplicitScratch::default()),
+            Integrator::ImplicitEuler => Scratch::Implicit(ImplicitScratch::default()),
+            Integrator::Xpbd => Scratch::Xpbd(XpbdScratch::default()),
+        };
+        let pool = WorkerPool::new(settings.threads)?;
+        let mut body = Body {
+            settings,
+            pool,
+            nodes,
+            saved_x: Vec::new(),
+            saved_v: Vec::new(),
+            wind_force: Vec::new(),
+            wind_start: Vec::new(),
+            triangles,
+            face_fragment,
+            fragment_count,
+            springs,
+            gas,
+            fracture,
+            obstacles,
+            scratch,
+            steps: 0,
+            time: 0.0,
+            generation: 0,
+            external_work: 0.0,
+            energy_start: 0.0,
+            last: BodyStats::default(),
+        };
+        body.energy_start = body.total_energy();
+        body.last = body.stats(0, 0, 0.0, 0);
+        Ok(body)
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &BodySettings {
+        &self.settings
+    }
+
+    /// Vertex positions.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.nodes.x
+    }
+
+    /// Vertex velocities.
+    pub fn velocities(&self) -> &[Vec3] {
+        &self.nodes.v
+    }
+
+    /// Vertex masses (pinned vertices keep theirs).
+    pub fn masses(&self) -> &[f32] {
+        &self.nodes.mass
+    }
+
+    /// Triangles (counter-clockwise from outside).
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
+    /// The connected piece of each triangle.
+    pub fn fragment_ids(&self) -> &[u32] {
+        &self.face_fragment
+    }
+
+    /// Number of connected pieces.
+    pub fn fragment_count(&self) -> usize {
+        self.fragment_count
+    }
+
+    /// For each vertex, the input vertex it was split from (identity before fracture).
+    pub fn vertex_origin(&self, i: usize) -> u32 {
+        self.fracture.as_ref().map_or(i as u32, |f| f.origin[i])
+    }
+
+    /// Bumped on every topology change.
+    pub fn topology_generation(&self) -> u64 {
+        self.generation
+    }
+
+    /// Number of springs now.
+    pub fn spring_count(&self) -> usize {
+        self.springs.len()
+    }
+
+    /// The stats of the last step (or of the initial state).
+    pub fn last_stats(&self) -> &BodyStats {
+        &self.last
+    }
+
+    /// Adds an obstacle.
+    pub fn add_obstacle(&mut self, obstacle: Obstacle) {
+        self.obstacles.push(obstacle);
+    }
+
+    fn check_vertex(&self, vertex: u32, name: &str) -> Result<usize> {
+        let n = self.nodes.len();
+        if vertex as usize >= n {
+            return Err(Error::invalid_argument(format!(
+                "`{name}` = {vertex} is out of range: the body has {n} vertices"
+            )));
+        }
+        Ok(vertex as usize)
+    }
+
+    /// Pins a vertex: it no longer moves (its velocity is set to zero; it keeps its mass).
+    pub fn pin(&mut self, vertex: u32) -> Result<()> {
+        let i = self.check_vertex(vertex, "vertex")?;
+        self.nodes.inv_mass[i] = 0.0;
+        self.nodes.v[i] = Vec3::ZERO;
+        Ok(())
+    }
+
+    /// Adds `impulse / m` to a vertex's velocity (no effect on a pinned vertex); its kinetic
+    /// energy counts as external work.
+    pub fn apply_impulse(&mut self, vertex: u32, impulse: Vec3) -> Result<()> {
+        let i = self.check_vertex(vertex, "vertex")?;
+        let before = energy::kinetic(&self.nodes.mass[i..=i], &self.nodes.v[i..=i]);
+        self.nodes.v[i] += impulse * self.nodes.inv_mass[i];
+        self.external_work += energy::kinetic(&self.nodes.mass[i..=i], &self.nodes.v[i..=i]) - before;
+        Ok(())
+    }
+
+    /// `E_kin + E_spring + E_grav + E_gas` (measures the gas at the current positions), J.
+    fn total_energy(&mut self) -> f64 {
+        let mut e = energy::kinetic(&self.nodes.mass, &self.nodes.v)
+            + energy::springs(&self.springs, &self.nodes.x, self.settings.spring_stiffness)
+            + energy::gravity(&self.nodes.mass, &self.nodes.x, self.settings.gravity);
+        if let Some(gas) = self.gas.as_mut() {
+            gas.measure(&self.nodes.x, &self.triangles, &self.face_fragment);
+            e += gas.energy();
+        }
+        e
+    }
+
+    /// `Σ (h |F_i|)² w_i / 2` at the saved start of the step: the kinetic energy the forces there
+    /// give in one step from rest (the source that an explicit first step draws on).
+    fn impulse_bound(&mut self, h: f32) -> f64 {
+        std::mem::swap(&mut self.nodes.x, &mut self.saved_x);
+        std::mem::swap(&mut self.nodes.v, &mut self.saved_v);
+        let mut f = self.internal_forces();
+        for (fi, &m) in f.iter_mut().zip(&self.nodes.mass) {
+            *fi += self.settings.gravity * m;
+        }
+        if self.settings.drag > 0.0 {
+            add_wind(&self.nodes.x, &self.nodes.v, &self.triangles, self.settings.wind, self.settings.drag, &mut f);
+        }
+        std::mem::swap(&mut self.nodes.x, &mut self.saved_x);
+        std::mem::swap(&mut self.nodes.v, &mut self.saved_v);
+        f.iter()
+            .zip(&self.nodes.inv_mass)
+            .map(|(fi, &w)| 0.5 * (h as f64 * fi.length() as f64).powi(2) * w as f64)
+            .sum()
+    }
+
+    fn energy_parts(&mut self) -> EnergyParts {
+        let gas = match self.gas.as_mut() {
+            Some(gas) => {
+                gas.measure(&self.nodes.x, &self.triangles, &self.face_fragment);
+                gas.energy()
+            }
+            None => 0.0,
+        };
+        EnergyParts {
+            kinetic: energy::kinetic(&self.nodes.mass, &self.nodes.v),
+            spring: energy::springs(&self.springs, &self.nodes.x, self.settings.spring_stiffness),
+            gravity: energy::gravity(&self.nodes.mass, &self.nodes.x, self.settings.gravity),
+            gas,
+        }
+    }
+
+    /// The largest stable time step of the explicit integrators, `2/ω_max`, s.
+    pub fn stable_time_step(&self) -> f64 {
+        let omega = energy::omega_max(&self.springs, &self.nodes.inv_mass, self.settings.spring_stiffness);
+        if omega > 0.0 { 2.0 / omega } else { f64::INFINITY }
+    }
+
+    fn integrator_name(&self) -> &'static str {
+        match self.settings.integrator {
+            Integrator::ExplicitEuler => "explicit Euler",
+            Integrator::SymplecticEuler => "symplectic Euler",
+            Integrator::ImplicitEuler => "implicit Euler",
+            Integrator::Xpbd => "XPBD",
+        }
+    }
+
+    fn unstable(&self, what: String) -> Error {
+        let h = self.settings.time_step as f64 / self.settings.substeps as f64;
+        let h_max = self.stable_time_step();
+        let advice = if h_max.is_finite() {
+            let substeps = (self.settings.time_step as f64 / (0.9 * h_max)).ceil().max(1.0);
+            format!(
+                "the largest stable time step is about {h_max:.3e} s (2/omega_max from K_s and the lightest vertex; \
+                 this step used h = {h:.3e} s): use substeps >= {substeps} or SOFTSHELL_INTEGRATOR_IMPLICIT_EULER"
+            )
+        } else {
+            "reduce time_step or use SOFTSHELL_INTEGRATOR_IMPLICIT_EULER".to_owned()
+        };
+        Error::new(
+            ErrorKind::Unstable,
+            format!(
+                "step {} diverged with {}: {what}; the state was rolled back to before the step; {advice}",
+                self.steps + 1,
+                self.integrator_name()
+            ),
+        )
+    }
+
+    /// Advances one step (SPEC 2.5). On divergence the state is rolled back and an
+    /// [`ErrorKind::Unstable`] error says what blew up and which time step would be stable.
+    pub fn step(&mut self) -> Result<BodyStats> {
+        let started = Instant::now();
+        let substeps = self.settings.substeps.max(1);
+        let h = self.settings.time_step / substeps as f32;
+        self.saved_x.clone_from(&self.nodes.x);
+        self.saved_v.clone_from(&self.nodes.v);
+        let before = self.energy_parts();
+        let before_forces_h = self.settings.time_step;
+        let mut work = 0.0;
+        let mut iterations = 0u64;
+        let mut clamped = false;
+        let mut diverged = None;
+        for _ in 0..substeps {
+            let (w, it) = self.substep(h);
+            work += w;
+            iterations += it as u64;
+            clamped |= self.gas.as_ref().is_some_and(|g| g.clamped);
+            if let Some(i) = self.nodes.x.iter().zip(&self.nodes.v).position(|(x, v)| !x.is_finite() || !v.is_finite())
+            {
+                diverged = Some(format!("vertex {i} reached a NaN or infinite position or velocity"));
+                break;
+            }
+        }
+        if diverged.is_none() {
+            // Divergence shows as kinetic energy that no source explains: the kinetic and spring
+            // energy at the start, what the gas and gravity released, and the external work.
+            // (XPBD and the implicit solver may leave spring energy unconverged; that is not
+            // divergence, so the test is on kinetic energy.)
+            let after = self.energy_parts();
+            let available = before.kinetic
+                + before.spring
+                + (before.gas - after.gas).max(0.0)
+                + (before.gravity - after.gravity).max(0.0)
+                + work.max(0.0);
+            if !after.total().is_finite() {
+                diverged = Some("the energy became infinite".to_owned());
+            } else if after.kinetic > 2.0 * available + 1e-9
+                && after.kinetic > 2.0 * (available + self.impulse_bound(before_forces_h)) + 1e-9
+            {
+                diverged = Some(format!(
+                    "the kinetic energy grew to {:.3e} J in one step while at most {available:.3e} J was available",
+                    after.kinetic
+                ));
+            }
+        }
+        if let Some(what) = diverged {
+            std::mem::swap(&mut self.nodes.x, &mut self.saved_x);
+            std::mem::swap(&mut self.nodes.v, &mut self.saved_v);
+            if let Some(gas) = self.gas.as_mut() {
+                gas.measure(&self.nodes.x, &self.triangles, &self.face_fragment);
+            }
+            return Err(self.unstable(what));
+        }
+        self.external_work += work;
+        self.steps += 1;
+        self.time += self.settings.time_step as f64;
+        if let Some(gas) = self.gas.as_mut() {
+            gas.measure(&self.nodes.x, &self.triangles, &self.face_fragment);
+            gas.leak(self.settings.time_step as f64, self.settings.leak_rate as f64);
+        }
+        let generation = self.generation;
+        let drift = if self.settings.fracture_enabled() {
+            self.total_energy() - self.energy_start - self.external_work
+        } else {
+            0.0
+        };
+        let (broken, cores) = self.fracture_phase();
+        if self.generation != generation {
+            // The energy reference moves with the springs that went away, so the drift goes on
+            // from where it was.
+            self.energy_start = self.total_energy() - self.external_work - drift;
+        }
+        let mut stats = self.stats(broken, cores, started.elapsed().as_secs_f64(), iterations);
+        stats.volume_clamped = clamped;
+        self.last = stats.clone();
+        Ok(stats)
+    }
+
+    fn substep(&mut self, h: f32) -> (f64, usize) {
+        // Work of the wind over the substep: its force at the start times the displacement.
+        if self.settings.drag > 0.0 {
+            self.wind_start.clone_from(&self.nodes.x);
+            self.wind_force.clear();
+            self.wind_force.resize(self.nodes.len(), Vec3::ZERO);
+            add_wind(
+                &self.nodes.x,
+                &self.nodes.v,
+                &self.triangles,
+                self.settings.wind,
+                self.settings.drag,
+                &mut self.wind_force,
+            );
+        }
+        let (_, iterations) = self.integrate(h);
+        let work = if self.settings.drag > 0.0 {
+            self.wind_force
+                .iter()
+                .zip(self.nodes.x.iter().zip(&self.wind_start))
+                .map(|(f, (x1, x0))| f.dot(*x1 - *x0) as f64)
+                .sum()
+        } else {
+            0.0
+        };
+        (work, iterations)
+    }
+
+    fn integrate(&mut self, h: f32) -> (f64, usize) {
+        let model = Model {
+            settings: &self.settings,
+            triangles: &self.triangles,
+            face_fragment: &self.face_fragment,
+            springs: &self.springs,
+            mass: &self.nodes.mass,
+            inv_mass: &self.nodes.inv_mass,
+        };
+        let (x, v) = (&mut self.nodes.x, &mut self.nodes.v);
+        let gas = self.gas.as_mut();
+        let result = match &mut self.scratch {
+            Scratch::Explicit(s) => {
+                (explicit::substep(&model, gas, x, v, h, self.settings.integrator == Integrator::SymplecticEuler, s), 0)
+            }
+            Scratch::Implicit(s) => {
+                implicit::substep(&model, gas, x, v, h, (10 * self.settings.iterations as usize).max(20), s)
+            }
+            Scratch::Xpbd(s) => (xpbd::substep(&model, gas, x, v, h, self.settings.iterations, &self.obstacles, s), 0),
+        };
+        // XPBD handles contacts inside its iterations.
+        if !self.obstacles.is_empty() && self.settings.integrator != Integrator::Xpbd {
+            let (restitution, friction) = (self.settings.restitution, self.settings.friction);
+            for i in 0..x.len() {
+                if self.nodes.inv_mass[i] > 0.0 {
+                    resolve(&mut x[i], &mut v[i], &self.obstacles, restitution, friction);
+                }
+            }
+        }
+        result
+    }
+
+    /// Net internal force (springs, damping, gas) on every vertex at the current state.
+    fn internal_forces(&mut self) -> Vec<Vec3> {
+        let n = self.nodes.len();
+        let mut f = vec![Vec3::ZERO; n];
+        let model = Model {
+            settings: &self.settings,
+            triangles: &self.triangles,
+            face_fragment: &self.face_fragment,
+            springs: &self.springs,
+            mass: &self.nodes.mass,
+            inv_mass: &self.nodes.inv_mass,
+        };
+        add_spring_forces(&model, &self.nodes.x, &self.nodes.v, &mut f);
+        if let Some(gas) = self.gas.as_mut() {
+            let mut gradient = vec![Vec3::ZERO; n];
+            add_gas_forces(&model, gas, &self.nodes.x, &mut gradient, &mut f);
+        }
+        f
+    }
+
+    /// SPEC 2.4 fracture check (springs, then cores) at the end of the step; returns
+    /// (springs broken, cores released).
+    fn fracture_phase(&mut self) -> (u64, u64) {
+        if !self.settings.fracture_enabled() {
+            return (0, 0);
+        }
+        let mut pairs = Vec::new();
+        if self.settings.break_strain > 0.0 {
+            let limit = self.settings.break_strain;
+            for (&[i, j], &rest) in self.springs.ends.iter().zip(&self.springs.rest) {
+                if spring_strain(self.nodes.x[i as usize], self.nodes.x[j as usize], rest) > limit {
+                    pairs.push([i, j]);
+                }
+            }
+        }
+        let mut cores = Vec::new();
+        if self.settings.break_force > 0.0 {
+            let limit = self.settings.break_force;
+            let f = self.internal_forces();
+            cores = f
+                .iter()
+                .enumerate()
+                .filter(|(_, f)| f.length() > limit)
+                .map(|(i, f)| (f.length(), i as u32))
+                .collect::<Vec<_>>();
+            cores.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        }
+        if pairs.is_empty() && cores.is_empty() {
+            return (0, 0);
+        }
+        let broken = pairs.len() as u64;
+        let released = self.change_topology(&pairs, &cores.iter().map(|c| c.1).collect::<Vec<_>>());
+        (broken, released)
+    }
+
+    /// Breaks the springs `pairs` (vertex pairs of current springs) and releases the core blocks
+    /// of `cores`, then rebuilds springs, fragments and gas. The one place where topology changes.
+    fn change_topology(&mut self, pairs: &[[u32; 2]], cores: &[u32]) -> u64 {
+        let n = self.nodes.len();
+        let fracture = self.fracture.get_or_insert_with(|| Fracture::new(n, self.triangles.len()));
+        let old_face_fragment = self.face_fragment.clone();
+        let mut topology = Topology::build(&self.triangles, n);
+        if !pairs.is_empty() {
+            let edges: Vec<u32> = pairs
+                .iter()
+                .filter_map(|&[a, b]| {
+                    let key = [a.min(b), a.max(b)];
+                    topology.edges.binary_search(&key).ok().map(|e| e as u32)
+                })
+                .collect();
+            crack::mark_broken(fracture, &topology, &edges);
+            let mut vertices: Vec<u32> = pairs.iter().flatten().copied().collect();
+            vertices.sort_unstable();
+            vertices.dedup();
+            crack::split_fans(fracture, &topology, &mut self.triangles, &mut self.nodes, &vertices);
+        }
+        let mut released = 0;
+        if !cores.is_empty() {
+            if !pairs.is_empty() {
+                topology = Topology::build(&self.triangles, self.nodes.len());
+            }
+            let mut touched = vec![false; self.nodes.len()];
+            for &v in cores {
+                if core_block::release(fracture, &topology, &mut self.triangles, &mut self.nodes, &mut touched, v) {
+                    released += 1;
+                }
+            }
+        }
+        self.rebuild(&old_face_fragment);
+        released
+    }
+
+    /// Rebuilds springs, fragments and gas after a topology change; bumps the generation.
+    fn rebuild(&mut self, old_face_fragment: &[u32]) {
+        let n = self.nodes.len();
+        let topology = Topology::build(&self.triangles, n);
+        self.springs = build_springs(&topology, self.fracture.as_ref(), &self.nodes.rest);
+        self.face_fragment = topology.face_components.clone();
+        self.fragment_count = topology.component_count;
+        if let Some(old) = self.gas.take() {
+            let mut gas =
+                Gas::new(n, &self.triangles, &self.face_fragment, self.fragment_count, &topology.boundary_loops);
+            gas.inherit(&old.n_rt, old_face_fragment, &self.face_fragment, &self.nodes.x, &self.triangles);
+            self.gas = Some(gas);
+        }
+        self.generation += 1;
+    }
+
+    /// Breaks the spring between vertices `a` and `b` by hand (an interactive cut), with the
+    /// same crack as a spring over its strain limit. Error if they are not joined by a spring.
+    pub fn break_edge(&mut self, a: u32, b: u32) -> Result<()> {
+        self.check_vertex(a, "a")?;
+        self.check_vertex(b, "b")?;
+        let key = [a.min(b), a.max(b)];
+        if a == b || !self.springs.ends.contains(&key) {
+            return Err(Error::invalid_argument(format!(
+                "vertices {a} and {b} are not joined by a spring (not an edge of the current mesh, or already broken)"
+            )));
+        }
+        let drift = self.total_energy() - self.energy_start - self.external_work;
+        self.change_topology(&[key], &[]);
+        self.energy_start = self.total_energy() - self.external_work - drift;
+        self.last = self.stats(1, 0, 0.0, 0);
+        Ok(())
+    }
+
+    fn stats(&mut self, broken: u64, cores: u64, seconds: f64, iterations: u64) -> BodyStats {
+        let energy = self.total_energy();
+        let (volume, pressure) = match &self.gas {
+            Some(gas) => {
+                let with_gas = (0..gas.fragment_count()).filter(|&f| gas.n_rt[f] > 0.0);
+                let volume: f64 = with_gas.clone().map(|f| gas.volume[f]).sum();
+                let n_rt: f64 = with_gas.map(|f| gas.n_rt[f]).sum();
+                (volume, if volume > 0.0 { n_rt / volume } else { 0.0 })
+            }
+            None => (crate::mesh::signed_volume(&self.nodes.x, &self.triangles), 0.0),
+        };
+        let max_strain = self
+            .springs
+            .ends
+            .iter()
+            .zip(&self.springs.rest)
+            .map(|(&[i, j], &rest)| spring_strain(self.nodes.x[i as usize], self.nodes.x[j as usize], rest))
+            .fold(0.0f32, f32::max) as f64;
+        BodyStats {
+            step: self.steps,
+            time: self.time,
+            volume,
+            pressure,
+            kinetic_energy: energy::kinetic(&self.nodes.mass, &self.nodes.v),
+            energy_drift: energy - self.energy_start - self.external_work,
+            springs_broken: broken,
+            cores_released: cores,
+            topology_generation: self.generation,
+            vertex_count: self.nodes.len(),
+            triangle_count: self.triangles.len(),
+            fragment_count: self.fragment_count,
+            step_seconds: seconds,
+            volume_clamped: self.gas.as_ref().is_some_and(|g| g.clamped),
+            max_strain,
+            solver_iterations: iterations,
+        }
+    }
+
+    /// Total momentum, kg m/s.
+    pub fn momentum(&self) -> glam::DVec3 {
+        energy::momentum(&self.nodes.mass, &self.nodes.v)
+    }
+
+    /// Heap bytes held by the body (its worker threads' stacks excluded).
+    pub fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + self.nodes.memory_bytes()
+            + (self.saved_x.capacity()
+                + self.saved_v.capacity()
+                + self.wind_force.capacity()
+                + self.wind_start.capacity())
+                * 12
+            + self.triangles.capacity() * 12
+            + self.face_fragment.capacity() * 4
+            + self.springs.memory_bytes()
+            + self.gas.as_ref().map_or(0, Gas::memory_bytes)
+            + self.fracture.as_ref().map_or(0, Fracture::memory_bytes)
+            + self.obstacles.capacity() * std::mem::size_of::<Obstacle>()
+            + self.scratch.memory_bytes()
+            + self.pool.memory_bytes()
+    }
+
+    /// Number of worker threads.
+    pub fn threads(&self) -> usize {
+        self.pool.threads()
+    }
+}

@@ -1,0 +1,105 @@
+//! Springs along the mesh edges (SPEC 2.1): Hooke force, damping along the spring, energy and
+//! the stiffness block used by the implicit integrator. Pure kernels; the loops live in `forces`.
+
+use glam::Vec3;
+
+/// The springs of a body: end vertices and rest lengths, one entry per unbroken mesh edge.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Springs {
+    /// End vertices `[i, j]`.
+    pub ends: Vec<[u32; 2]>,
+    /// Rest length L0, m.
+    pub rest: Vec<f32>,
+}
+
+impl Springs {
+    pub fn len(&self) -> usize {
+        self.ends.len()
+    }
+
+    pub fn memory_bytes(&self) -> usize {
+        self.ends.capacity() * 8 + self.rest.capacity() * 4
+    }
+}
+
+/// Lengths below this fraction of the rest length have no direction: no force (degenerate guard).
+const MIN_LENGTH_RATIO: f32 = 1e-6;
+
+/// SPEC 2.1: force on end i of spring (i, j); the force on j is its opposite.
+/// `f = K_s (|d| - L0) u + K_d ((v_j - v_i)·u) u`, `d = x_j - x_i`, `u = d/|d|`.
+pub(crate) fn spring_force(xi: Vec3, xj: Vec3, vi: Vec3, vj: Vec3, rest: f32, ks: f32, kd: f32) -> Vec3 {
+    let d = xj - xi;
+    let len = d.length();
+    if len <= MIN_LENGTH_RATIO * rest {
+        return Vec3::ZERO;
+    }
+    let u = d / len;
+    u * (ks * (len - rest) + kd * (vj - vi).dot(u))
+}
+
+/// Spring energy `K_s (|d| - L0)^2 / 2`, J.
+pub(crate) fn spring_energy(xi: Vec3, xj: Vec3, rest: f32, ks: f32) -> f64 {
+    let stretch = ((xj - xi).length() - rest) as f64;
+    0.5 * ks as f64 * stretch * stretch
+}
+
+/// Strain `(|d| - L0)/L0`.
+pub(crate) fn spring_strain(xi: Vec3, xj: Vec3, rest: f32) -> f32 {
+    ((xj - xi).length() - rest) / rest
+}
+
+/// The stiffness block `B = ∂f_i/∂x_j = a I + b u uᵀ` of a spring, returned as `(a, b, u)`:
+/// `a = K_s max(0, 1 - L0/|d|)`, `a + b = K_s` (the exact Hessian with its transverse part clamped
+/// at zero when compressed, so the implicit system stays positive definite).
+pub(crate) fn spring_block(xi: Vec3, xj: Vec3, rest: f32, ks: f32) -> (f32, f32, Vec3) {
+    let d = xj - xi;
+    let len = d.length();
+    if len <= MIN_LENGTH_RATIO * rest {
+        return (0.0, 0.0, Vec3::ZERO);
+    }
+    let a = ks * (1.0 - rest / len).max(0.0);
+    (a, ks - a, d / len)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn force_is_minus_energy_gradient() {
+        let (xi, xj) = (Vec3::new(0.1, 0.2, -0.3), Vec3::new(1.0, -0.4, 0.5));
+        let (rest, ks) = (0.7, 123.0);
+        let f = spring_force(xi, xj, Vec3::ZERO, Vec3::ZERO, rest, ks, 0.0);
+        let h = 1e-3f32;
+        for axis in 0..3 {
+            let mut e = Vec3::ZERO;
+            e[axis] = h;
+            let fd = (spring_energy(xi + e, xj, rest, ks) - spring_energy(xi - e, xj, rest, ks)) / (2.0 * h as f64);
+            assert!((fd + f[axis] as f64).abs() < 1e-2 * (1.0 + fd.abs()), "axis {axis}: {fd} vs {}", f[axis]);
+        }
+    }
+
+    #[test]
+    fn block_matches_finite_differences_when_stretched() {
+        let (xi, xj) = (Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.2, 0.3, -0.2));
+        let (rest, ks) = (1.0, 50.0);
+        let (a, b, u) = spring_block(xi, xj, rest, ks);
+        let h = 1e-3f32;
+        for axis in 0..3 {
+            let mut e = Vec3::ZERO;
+            e[axis] = h;
+            let fd = (spring_force(xi, xj + e, Vec3::ZERO, Vec3::ZERO, rest, ks, 0.0)
+                - spring_force(xi, xj - e, Vec3::ZERO, Vec3::ZERO, rest, ks, 0.0))
+                / (2.0 * h);
+            let exact = e / h * a + u * (b * u.dot(e / h));
+            assert!((fd - exact).length() < 2e-2 * ks, "axis {axis}: {fd} vs {exact}");
+        }
+    }
+
+    #[test]
+    fn damping_acts_along_the_spring_only() {
+        let f = spring_force(Vec3::ZERO, Vec3::X, Vec3::ZERO, Vec3::new(2.0, 5.0, 0.0), 1.0, 0.0, 3.0);
+        assert_eq!(f, Vec3::new(6.0, 0.0, 0.0));
+        assert_eq!(spring_force(Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::X, 1.0, 1.0, 1.0), Vec3::ZERO);
+    }
+}

@@ -1,0 +1,870 @@
+//! `SoftshellBody`: the mass-spring soft body with gas and fracture (SPEC section 2) behind the
+//! C ABI. This file checks arguments and converts types; the physics lives in `crate::body`.
+
+#[cfg(feature = "body")]
+use glam::Vec3;
+
+use super::boundary::{
+    Poisonable, SoftshellStatus, arg_kind, arg_ref, arg_vec3, check_cookie, check_range, handle_call, handle_read,
+    out_arg, status_call, value_call,
+};
+#[cfg(feature = "body")]
+use super::boundary::{copy_out, write_out};
+use super::mesh::SoftshellMesh;
+#[cfg(feature = "body")]
+use crate::body::{Body, BodySettings, BodyStats, Integrator, Obstacle};
+use crate::error::{Error, Result};
+
+/// Explicit Euler, `x += h v; v += h a` with the old velocity: the paper's integrator. Unstable
+/// for stiff springs (`h` above about `2/omega`): such a step returns `SOFTSHELL_STATUS_UNSTABLE`.
+pub const SOFTSHELL_INTEGRATOR_EXPLICIT_EULER: u32 = 0;
+/// Symplectic (semi-implicit) Euler, `v += h a; x += h v`: stable while `h < 2/omega_max`.
+pub const SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER: u32 = 1;
+/// Linearised backward Euler solved by conjugate gradients: stable at any time step, with
+/// numerical damping. The default.
+pub const SOFTSHELL_INTEGRATOR_IMPLICIT_EULER: u32 = 2;
+/// XPBD: springs as distance constraints with compliance 1/K_s, gas as a volume constraint;
+/// `iterations` Gauss-Seidel sweeps per substep.
+pub const SOFTSHELL_INTEGRATOR_XPBD: u32 = 3;
+
+const INTEGRATORS: &str = "SOFTSHELL_INTEGRATOR_EXPLICIT_EULER (0), SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER (1), \
+                           SOFTSHELL_INTEGRATOR_IMPLICIT_EULER (2), SOFTSHELL_INTEGRATOR_XPBD (3)";
+
+/// The private cookie of `SoftshellBodyDef`.
+pub(crate) const BODY_DEF_COOKIE: u32 = 0x5B0D_7DEF;
+
+/// Settings of a soft body. Fill with `softshell_body_def_default()`, then edit fields.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SoftshellBodyDef {
+    /// Step length h, s, in [1e-6, 1]. Default 1/60.
+    pub time_step: f32,
+    /// Substeps per step (each h / substeps), in [1, 1000]. Default 1.
+    pub substeps: u32,
+    /// `SOFTSHELL_INTEGRATOR_EXPLICIT_EULER` (the paper's) | `_SYMPLECTIC_EULER` |
+    /// `_IMPLICIT_EULER` (default) | `_XPBD`.
+    pub integrator: u32,
+    /// Total mass, kg, > 0; spread over the vertices in proportion to their share of the area.
+    /// Default 1.
+    pub total_mass: f32,
+    /// Spring stiffness K_s, N/m, in [0, 1e12]: one spring per mesh edge. Default 1000.
+    pub spring_stiffness: f32,
+    /// Spring damping K_d along each spring, N s/m, in [0, 1e9]. Default 1.
+    pub spring_damping: f32,
+    /// Amount of gas nRT, J (pressure = nRT / volume), in [0, 1e12]. 0 (default) = no gas; then
+    /// open meshes (cloth) are allowed. With gas the mesh must be closed, manifold and outward.
+    pub gas_amount: f32,
+    /// Gravity, m/s^2. Default 0, -9.81, 0.
+    pub gravity: [f32; 3],
+    /// Wind velocity, m/s. Default 0, 0, 0.
+    pub wind: [f32; 3],
+    /// Wind drag coefficient, kg/(m^2 s): each face feels `drag ((wind - v)·n) n area`, in
+    /// [0, 1e6]. Default 0 (no wind force).
+    pub drag: f32,
+    /// Spring strain `(length - rest)/rest` above which a spring breaks and the surface cracks,
+    /// in [0, 1e6]. 0 (default) = never.
+    pub break_strain: f32,
+    /// Net force on a vertex, N, above which it is cut out as a core block, in [0, 1e12].
+    /// 0 (default) = never.
+    pub break_force: f32,
+    /// Gas leak through holes, m/(Pa s): `d(nRT)/dt = -leak_rate * hole_area * pressure`, in
+    /// [0, 1e6]. Default 0.
+    pub leak_rate: f32,
+    /// A ground plane y = ground_height (normal +y). Default false.
+    pub ground: bool,
+    /// Height of the ground plane, m. Default 0.
+    pub ground_height: f32,
+    /// Restitution of contacts with the ground and obstacles, in [0, 1]. Default 0.
+    pub restitution: f32,
+    /// Coulomb friction coefficient of contacts, in [0, 1000]. Default 0.5.
+    pub friction: f32,
+    /// Worker threads: 0 = one per core, 1 = serial (default), at most 256. Results do not depend
+    /// on it.
+    pub threads: u32,
+    /// XPBD Gauss-Seidel sweeps per substep; the implicit integrator allows 10 times as many
+    /// conjugate-gradient iterations (at least 20). In [1, 1000]. Default 10.
+    pub iterations: u32,
+    /// Set by `softshell_body_def_default`; do not touch.
+    pub internal_cookie: u32,
+}
+
+/// What a step did. Filled by `softshell_body_step`. Fields may be appended in later versions.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SoftshellBodyStats {
+    /// Steps taken so far.
+    pub step: u64,
+    /// Simulated time, s.
+    pub time: f64,
+    /// Enclosed volume, m^3: the sum over the pieces that hold gas (holes capped), or the signed
+    /// volume of the mesh without gas.
+    pub volume: f64,
+    /// Mean gas pressure (total nRT / total volume), Pa; 0 without gas.
+    pub pressure: f64,
+    /// Kinetic energy, J.
+    pub kinetic_energy: f64,
+    /// Energy error: (kinetic + spring + gas + gravitational energy) minus its initial value and
+    /// the work of wind and impulses, J. Damping, contacts and leaks make it negative; a growing
+    /// positive value means the integrator is adding energy.
+    pub energy_drift: f64,
+    /// Springs broken during this step.
+    pub springs_broken: u64,
+    /// Core blocks released during this step.
+    pub cores_released: u64,
+    /// Bumped on every topology change (re-query buffers when it changes).
+    pub topology_generation: u64,
+    /// Vertices now (fracture appends vertices).
+    pub vertex_count: usize,
+    /// Triangles now.
+    pub triangle_count: usize,
+    /// Connected pieces now.
+    pub fragment_count: usize,
+    /// Wall-clock time of the step, s.
+    pub step_seconds: f64,
+    /// True when a gas volume was clamped during the step (a piece near zero or inverted volume:
+    /// its pressure stopped growing).
+    pub volume_clamped: bool,
+    /// Largest spring strain at the end of the step.
+    pub max_strain: f64,
+    /// Conjugate-gradient iterations of the step (implicit Euler), 0 otherwise.
+    pub solver_iterations: u64,
+}
+
+#[cfg(feature = "body")]
+impl From<&BodyStats> for SoftshellBodyStats {
+    fn from(s: &BodyStats) -> Self {
+        Self {
+            step: s.step,
+            time: s.time,
+            volume: s.volume,
+            pressure: s.pressure,
+            kinetic_energy: s.kinetic_energy,
+            energy_drift: s.energy_drift,
+            springs_broken: s.springs_broken,
+            cores_released: s.cores_released,
+            topology_generation: s.topology_generation,
+            vertex_count: s.vertex_count,
+            triangle_count: s.triangle_count,
+            fragment_count: s.fragment_count,
+            step_seconds: s.step_seconds,
+            volume_clamped: s.volume_clamped,
+            max_strain: s.max_strain,
+            solver_iterations: s.solver_iterations,
+        }
+    }
+}
+
+/// A mass-spring soft body with gas and fracture (SPEC section 2).
+///
+/// Created by `softshell_body_new`, destroyed by `softshell_body_free`. Functions:
+/// `softshell_body_add_sphere_obstacle`, `_add_plane_obstacle`, `_pin_vertex`,
+/// `_apply_impulse`, `_break_edge`, `_step`, `_topology_generation`, `_vertex_count`,
+/// `_triangle_count`, `_fragment_count`, `_copy_positions`, `_copy_velocities`, `_copy_masses`,
+/// `_copy_triangles`, `_copy_vertex_origins`, `_copy_fragment_ids`, `_memory_bytes`.
+///
+/// Fracture appends vertices and rewrites triangles: vertex indices are stable (survivors are
+/// never renumbered), but the counts change, so re-query buffer sizes whenever
+/// `softshell_body_topology_generation` changes.
+///
+/// Thread rules: a body may move between threads; one body must not be used from two threads at
+/// once; different bodies may be stepped concurrently.
+pub struct SoftshellBody {
+    #[cfg(feature = "body")]
+    pub(crate) body: Body,
+    poisoned: bool,
+}
+
+impl Poisonable for SoftshellBody {
+    fn is_poisoned(&self) -> bool {
+        self.poisoned
+    }
+    fn poison(&mut self) {
+        self.poisoned = true;
+    }
+}
+
+#[cfg(not(feature = "body"))]
+fn unsupported() -> Error {
+    Error::unsupported("the soft body simulator", "body")
+}
+
+/// The default body def: h = 1/60 s, 1 substep, implicit Euler, 1 kg, K_s = 1000 N/m,
+/// K_d = 1 N s/m, no gas, gravity 0,-9.81,0, no wind, no fracture, no ground, restitution 0,
+/// friction 0.5, 1 thread, 10 iterations.
+#[unsafe(no_mangle)]
+pub extern "C" fn softshell_body_def_default() -> SoftshellBodyDef {
+    SoftshellBodyDef {
+        time_step: 1.0 / 60.0,
+        substeps: 1,
+        integrator: SOFTSHELL_INTEGRATOR_IMPLICIT_EULER,
+        total_mass: 1.0,
+        spring_stiffness: 1000.0,
+        spring_damping: 1.0,
+        gas_amount: 0.0,
+        gravity: [0.0, -9.81, 0.0],
+        wind: [0.0; 3],
+        drag: 0.0,
+        break_strain: 0.0,
+        break_force: 0.0,
+        leak_rate: 0.0,
+        ground: false,
+        ground_height: 0.0,
+        restitution: 0.0,
+        friction: 0.5,
+        threads: 1,
+        iterations: 10,
+        internal_cookie: BODY_DEF_COOKIE,
+    }
+}
+
+fn check_count(name: &str, value: u32, min: u32, max: u32) -> Result<()> {
+    if value < min || value > max {
+        return Err(Error::invalid_argument(format!("`{name}` = {value} must be in [{min}, {max}]")));
+    }
+    Ok(())
+}
+
+fn check_vector(name: &str, value: [f32; 3], limit: f32) -> Result<()> {
+    for (axis, &c) in value.iter().enumerate() {
+        check_range(&format!("{name}[{axis}]"), c, -limit, limit)?;
+    }
+    Ok(())
+}
+
+impl TryFrom<u32> for IntegratorKind {
+    type Error = ();
+    fn try_from(value: u32) -> std::result::Result<Self, ()> {
+        match value {
+            SOFTSHELL_INTEGRATOR_EXPLICIT_EULER => Ok(IntegratorKind),
+            SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER => Ok(IntegratorKind),
+            SOFTSHELL_INTEGRATOR_IMPLICIT_EULER => Ok(IntegratorKind),
+            SOFTSHELL_INTEGRATOR_XPBD => Ok(IntegratorKind),
+            _ => Err(()),
+        }
+    }
+}
+
+/// A checked integrator selector (kept out of the header: not `pub` outside the crate).
+struct IntegratorKind;
+
+/// Checks every field of a def (messages name the field, its value and the valid range).
+fn validate(def: &SoftshellBodyDef) -> Result<()> {
+    check_cookie(def.internal_cookie, BODY_DEF_COOKIE, "SoftshellBodyDef", "softshell_body_def_default")?;
+    check_range("time_step", def.time_step, 1e-6, 1.0)?;
+    check_count("substeps", def.substeps, 1, 1000)?;
+    check_count("iterations", def.iterations, 1, 1000)?;
+    let _: IntegratorKind = arg_kind(def.integrator, "integrator", INTEGRATORS)?;
+    check_range("total_mass", def.total_mass, 1e-12, 1e12)?;
+    check_range("spring_stiffness", def.spring_stiffness, 0.0, 1e12)?;
+    check_range("spring_damping", def.spring_damping, 0.0, 1e9)?;
+    check_range("gas_amount", def.gas_amount, 0.0, 1e12)?;
+    check_vector("gravity", def.gravity, 1e6)?;
+    check_vector("wind", def.wind, 1e6)?;
+    check_range("drag", def.drag, 0.0, 1e6)?;
+    check_range("break_strain", def.break_strain, 0.0, 1e6)?;
+    check_range("break_force", def.break_force, 0.0, 1e12)?;
+    check_range("leak_rate", def.leak_rate, 0.0, 1e6)?;
+    check_range("ground_height", def.ground_height, -1e9, 1e9)?;
+    check_range("restitution", def.restitution, 0.0, 1.0)?;
+    check_range("friction", def.friction, 0.0, 1000.0)?;
+    check_count("threads", def.threads, 0, 256)?;
+    Ok(())
+}
+
+#[cfg(feature = "body")]
+fn settings_of(def: &SoftshellBodyDef) -> BodySettings {
+    BodySettings {
+        time_step: def.time_step,
+        substeps: def.substeps,
+        iterations: def.iterations,
+        integrator: match def.integrator {
+            SOFTSHELL_INTEGRATOR_EXPLICIT_EULER => Integrator::ExplicitEuler,
+            SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER => Integrator::SymplecticEuler,
+            SOFTSHELL_INTEGRATOR_XPBD => Integrator::Xpbd,
+            _ => Integrator::ImplicitEuler,
+        },
+        total_mass: def.total_mass,
+        spring_stiffness: def.spring_stiffness,
+        spring_damping: def.spring_damping,
+        gas_amount: def.gas_amount,
+        gravity: Vec3::from_array(def.gravity),
+        wind: Vec3::from_array(def.wind),
+        drag: def.drag,
+        break_strain: def.break_strain,
+        break_force: def.break_force,
+        leak_rate: def.leak_rate,
+        ground: def.ground,
+        ground_height: def.ground_height,
+        restitution: def.restitution,
+        friction: def.friction,
+        threads: def.threads,
+    }
+}
+
+/// Creates a soft body from `mesh` (copied: the mesh may be freed afterwards) and `def`.
+///
+/// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL pointer, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
+/// for a def not made by `softshell_body_def_default` or a field out of range (the message names
+/// it), `SOFTSHELL_STATUS_INVALID_MESH` when the mesh does not suit (with gas: not closed,
+/// manifold and outward; always: a triangle with a repeated corner or an edge of zero length),
+/// `SOFTSHELL_STATUS_UNSUPPORTED` when built without the `body` feature. On success
+/// `*out_body` receives a new handle to free with `softshell_body_free`; on failure it is left
+/// unchanged.
+///
+/// # Safety
+/// `mesh` must be NULL or a live mesh, `def` NULL or a readable def, `out_body` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_new(
+    mesh: *const SoftshellMesh,
+    def: *const SoftshellBodyDef,
+    out_body: *mut *mut SoftshellBody,
+) -> SoftshellStatus {
+    status_call("softshell_body_new", || {
+        // SAFETY: the caller promises a live mesh or NULL.
+        let mesh = unsafe { arg_ref(mesh, "mesh")? };
+        // SAFETY: the caller promises a readable def or NULL.
+        let def = unsafe { arg_ref(def, "def")? };
+        let out_body = out_arg(out_body, "out_body")?;
+        validate(def)?;
+        #[cfg(feature = "body")]
+        {
+            let body = Body::new(&mesh.mesh, &mesh.topology, settings_of(def))?;
+            let handle = Box::into_raw(Box::new(SoftshellBody { body, poisoned: false }));
+            // SAFETY: checked by out_arg.
+            unsafe { write_out(out_body, handle) };
+            Ok(())
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = (mesh, out_body);
+            Err(unsupported())
+        }
+    })
+}
+
+/// Destroys a body. `softshell_body_free(NULL)` does nothing; freeing twice is undefined
+/// behaviour.
+///
+/// # Safety
+/// `body` must be NULL or a live body that is not used again.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_free(body: *mut SoftshellBody) {
+    value_call("softshell_body_free", (), || {
+        if !body.is_null() {
+            // SAFETY: the caller hands back a pointer made by Box::into_raw and never uses it again.
+            drop(unsafe { Box::from_raw(body) });
+        }
+    })
+}
+
+/// Adds a solid sphere obstacle (centre `center` float[3], m; `radius` > 0, m): vertices are
+/// kept outside it with the def's restitution and friction.
+/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius not > 0.
+///
+/// # Safety
+/// `body` must be NULL or a live body; `center` NULL or three readable floats.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_add_sphere_obstacle(
+    body: *mut SoftshellBody,
+    center: *const f32,
+    radius: f32,
+) -> SoftshellStatus {
+    handle_call("softshell_body_add_sphere_obstacle", body, "body", |h| {
+        // SAFETY: the caller promises three floats or NULL.
+        let center = unsafe { arg_vec3(center, "center")? };
+        check_range("radius", radius, f32::MIN_POSITIVE, 1e9)?;
+        #[cfg(feature = "body")]
+        {
+            h.body.add_obstacle(Obstacle::Sphere { center: Vec3::from_array(center), radius });
+            Ok(())
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = (h, center);
+            Err(unsupported())
+        }
+    })
+}
+
+/// Adds a half-space obstacle: the plane through `point` (float[3], m) with `normal` (float[3],
+/// any non-zero length, pointing to the free side); vertices are kept on the normal's side.
+/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a zero normal.
+///
+/// # Safety
+/// `body` must be NULL or a live body; `point` and `normal` NULL or three readable floats each.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_add_plane_obstacle(
+    body: *mut SoftshellBody,
+    point: *const f32,
+    normal: *const f32,
+) -> SoftshellStatus {
+    handle_call("softshell_body_add_plane_obstacle", body, "body", |h| {
+        // SAFETY: the caller promises three floats or NULL.
+        let point = unsafe { arg_vec3(point, "point")? };
+        // SAFETY: as above.
+        let normal = unsafe { arg_vec3(normal, "normal")? };
+        let length = (normal[0] as f64).hypot(normal[1] as f64).hypot(normal[2] as f64);
+        if !(length > 1e-12) || !length.is_finite() {
+            return Err(Error::invalid_argument(format!(
+                "`normal` = ({}, {}, {}) must have a non-zero finite length",
+                normal[0], normal[1], normal[2]
+            )));
+        }
+        #[cfg(feature = "body")]
+        {
+            let n = (Vec3::from_array(normal).as_dvec3() / length).as_vec3();
+            h.body.add_obstacle(Obstacle::Plane { point: Vec3::from_array(point), normal: n });
+            Ok(())
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = (h, point);
+            Err(unsupported())
+        }
+    })
+}
+
+/// Pins vertex `vertex`: it stays where it is (velocity zero) and no longer responds to forces.
+/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an index out of range.
+///
+/// # Safety
+/// `body` must be NULL or a live body.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_pin_vertex(body: *mut SoftshellBody, vertex: u32) -> SoftshellStatus {
+    handle_call("softshell_body_pin_vertex", body, "body", |h| {
+        #[cfg(feature = "body")]
+        {
+            h.body.pin(vertex)
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = (h, vertex);
+            Err(unsupported())
+        }
+    })
+}
+
+/// Applies `impulse` (float[3], N s) to vertex `vertex`: its velocity changes by impulse/mass
+/// (a pinned vertex ignores it). Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an index out of
+/// range or a non-finite impulse.
+///
+/// # Safety
+/// `body` must be NULL or a live body; `impulse` NULL or three readable floats.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_apply_impulse(
+    body: *mut SoftshellBody,
+    vertex: u32,
+    impulse: *const f32,
+) -> SoftshellStatus {
+    handle_call("softshell_body_apply_impulse", body, "body", |h| {
+        // SAFETY: the caller promises three floats or NULL.
+        let impulse = unsafe { arg_vec3(impulse, "impulse")? };
+        check_vector("impulse", impulse, 1e12)?;
+        #[cfg(feature = "body")]
+        {
+            h.body.apply_impulse(vertex, Vec3::from_array(impulse))
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = (h, vertex);
+            Err(unsupported())
+        }
+    })
+}
+
+/// Breaks the spring between vertices `a` and `b` by hand (an interactive cut): the same crack
+/// as a spring over `break_strain`. The surface opens where a chain of broken edges passes through
+/// a vertex (that vertex is split; copies are appended). Bumps the topology generation.
+/// Works whatever the break limits are. Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` when an index
+/// is out of range or `a` and `b` are not joined by a spring (not an edge, or already broken).
+///
+/// # Safety
+/// `body` must be NULL or a live body.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_break_edge(body: *mut SoftshellBody, a: u32, b: u32) -> SoftshellStatus {
+    handle_call("softshell_body_break_edge", body, "body", |h| {
+        #[cfg(feature = "body")]
+        {
+            h.body.break_edge(a, b)
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = (h, a, b);
+            Err(unsupported())
+        }
+    })
+}
+
+/// Advances the body by one `time_step`: forces, integration (substeps), obstacles, gas leak,
+/// then fracture (springs over `break_strain` crack, nodes over `break_force` release core
+/// blocks). Writes what happened into `*out_stats` when it is not NULL.
+///
+/// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a NaN, or energy growing without a
+/// source): the state is rolled back to before the step, `*out_stats` is not written, and the
+/// message gives the largest stable time step it estimates.
+///
+/// # Safety
+/// `body` must be NULL or a live body; `out_stats` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_step(
+    body: *mut SoftshellBody,
+    out_stats: *mut SoftshellBodyStats,
+) -> SoftshellStatus {
+    handle_call("softshell_body_step", body, "body", |h| {
+        let out_stats = if out_stats.is_null() { None } else { Some(out_arg(out_stats, "out_stats")?) };
+        #[cfg(feature = "body")]
+        {
+            let stats = h.body.step()?;
+            if let Some(out) = out_stats {
+                // SAFETY: checked by out_arg.
+                unsafe { write_out(out, SoftshellBodyStats::from(&stats)) };
+            }
+            Ok(())
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = (h, out_stats);
+            Err(unsupported())
+        }
+    })
+}
+
+#[cfg(feature = "body")]
+fn read_body<T>(body: *const SoftshellBody, fallback: T, f: impl FnOnce(&Body) -> T) -> T {
+    // SAFETY: the caller promises a live body or NULL.
+    match unsafe { arg_ref(body, "body") } {
+        Ok(h) if !h.poisoned => f(&h.body),
+        _ => fallback,
+    }
+}
+
+/// Topology generation: 0 at creation, bumped by every topology change (a crack, a core block,
+/// `softshell_body_break_edge`). When it changes, re-query vertex and triangle counts and
+/// buffer sizes. 0 for NULL.
+///
+/// # Safety
+/// `body` must be NULL or a live body.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_topology_generation(body: *const SoftshellBody) -> u64 {
+    value_call("softshell_body_topology_generation", 0, || {
+        #[cfg(feature = "body")]
+        {
+            read_body(body, 0, |b| b.topology_generation())
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = body;
+            0
+        }
+    })
+}
+
+/// Number of vertices now (grows with fracture); 0 for NULL.
+///
+/// # Safety
+/// `body` must be NULL or a live body.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_vertex_count(body: *const SoftshellBody) -> usize {
+    value_call("softshell_body_vertex_count", 0, || {
+        #[cfg(feature = "body")]
+        {
+            read_body(body, 0, |b| b.positions().len())
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = body;
+            0
+        }
+    })
+}
+
+/// Number of triangles now (grows when core blocks are released); 0 for NULL.
+///
+/// # Safety
+/// `body` must be NULL or a live body.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_triangle_count(body: *const SoftshellBody) -> usize {
+    value_call("softshell_body_triangle_count", 0, || {
+        #[cfg(feature = "body")]
+        {
+            read_body(body, 0, |b| b.triangles().len())
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = body;
+            0
+        }
+    })
+}
+
+/// Number of connected pieces (fragments) now; 0 for NULL.
+///
+/// # Safety
+/// `body` must be NULL or a live body.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_fragment_count(body: *const SoftshellBody) -> usize {
+    value_call("softshell_body_fragment_count", 0, || {
+        #[cfg(feature = "body")]
+        {
+            read_body(body, 0, |b| b.fragment_count())
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = body;
+            0
+        }
+    })
+}
+
+/// Heap bytes held by the body (positions, springs, gas and fracture bookkeeping, scratch);
+/// nothing is held for gas without gas, nor for fracture while both break limits are 0 and no
+/// edge was broken by hand. 0 for NULL.
+///
+/// # Safety
+/// `body` must be NULL or a live body.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_memory_bytes(body: *const SoftshellBody) -> usize {
+    value_call("softshell_body_memory_bytes", 0, || {
+        #[cfg(feature = "body")]
+        {
+            read_body(body, 0, |b| b.memory_bytes())
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = body;
+            0
+        }
+    })
+}
+
+/// Shared body of the copy functions: `len` elements filled by `fill` from the body.
+#[cfg(feature = "body")]
+unsafe fn copy_from<T>(
+    function: &str,
+    body: *const SoftshellBody,
+    out: *mut T,
+    capacity: usize,
+    out_len: *mut usize,
+    len: impl FnOnce(&Body) -> usize,
+    fill: impl FnOnce(&Body, &mut [T]),
+) -> SoftshellStatus {
+    handle_read(function, body, "body", |h| {
+        let n = len(&h.body);
+        // SAFETY: the caller promises the buffer; copy_out checks its size before writing.
+        unsafe { copy_out(n, out, capacity, out_len, |dst| fill(&h.body, dst)) }
+    })
+}
+
+/// Copies the positions (x,y,z per vertex, `3 * vertex_count` floats, m) into `out`.
+/// If `out` is NULL or `capacity` (in floats) is too small, returns
+/// `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
+/// nothing else. On success `*out_len` is the number of floats written.
+///
+/// # Safety
+/// `body` must be NULL or a live body; `out` NULL or `capacity` writable floats; `out_len` NULL
+/// or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_copy_positions(
+    body: *const SoftshellBody,
+    out: *mut f32,
+    capacity: usize,
+    out_len: *mut usize,
+) -> SoftshellStatus {
+    #[cfg(feature = "body")]
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        copy_from(
+            "softshell_body_copy_positions",
+            body,
+            out,
+            capacity,
+            out_len,
+            |b| b.positions().len() * 3,
+            |b, dst| {
+                for (chunk, p) in dst.chunks_exact_mut(3).zip(b.positions()) {
+                    chunk.copy_from_slice(&p.to_array());
+                }
+            },
+        )
+    }
+    #[cfg(not(feature = "body"))]
+    {
+        let _ = (out, capacity, out_len);
+        handle_read("softshell_body_copy_positions", body, "body", |_| Err(unsupported()))
+    }
+}
+
+/// Copies the velocities (x,y,z per vertex, `3 * vertex_count` floats, m/s) into `out`, with the
+/// buffer rules of `softshell_body_copy_positions`.
+///
+/// # Safety
+/// As `softshell_body_copy_positions`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_copy_velocities(
+    body: *const SoftshellBody,
+    out: *mut f32,
+    capacity: usize,
+    out_len: *mut usize,
+) -> SoftshellStatus {
+    #[cfg(feature = "body")]
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        copy_from(
+            "softshell_body_copy_velocities",
+            body,
+            out,
+            capacity,
+            out_len,
+            |b| b.velocities().len() * 3,
+            |b, dst| {
+                for (chunk, p) in dst.chunks_exact_mut(3).zip(b.velocities()) {
+                    chunk.copy_from_slice(&p.to_array());
+                }
+            },
+        )
+    }
+    #[cfg(not(feature = "body"))]
+    {
+        let _ = (out, capacity, out_len);
+        handle_read("softshell_body_copy_velocities", body, "body", |_| Err(unsupported()))
+    }
+}
+
+/// Copies the vertex masses (one float per vertex, kg; pinned vertices keep theirs) into `out`,
+/// with the buffer rules of `softshell_body_copy_positions`. Their sum stays `total_mass`
+/// through fracture.
+///
+/// # Safety
+/// As `softshell_body_copy_positions`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_copy_masses(
+    body: *const SoftshellBody,
+    out: *mut f32,
+    capacity: usize,
+    out_len: *mut usize,
+) -> SoftshellStatus {
+    #[cfg(feature = "body")]
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        copy_from(
+            "softshell_body_copy_masses",
+            body,
+            out,
+            capacity,
+            out_len,
+            |b| b.masses().len(),
+            |b, dst| dst.copy_from_slice(b.masses()),
+        )
+    }
+    #[cfg(not(feature = "body"))]
+    {
+        let _ = (out, capacity, out_len);
+        handle_read("softshell_body_copy_masses", body, "body", |_| Err(unsupported()))
+    }
+}
+
+/// Copies the triangles (a,b,c per triangle, `3 * triangle_count` uint32_t, counter-clockwise
+/// from outside) into `out`, with the buffer rules of `softshell_body_copy_positions`
+/// (capacity and `*out_len` count uint32_t).
+///
+/// # Safety
+/// As `softshell_body_copy_positions`, with `capacity` writable uint32_t.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_copy_triangles(
+    body: *const SoftshellBody,
+    out: *mut u32,
+    capacity: usize,
+    out_len: *mut usize,
+) -> SoftshellStatus {
+    #[cfg(feature = "body")]
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        copy_from(
+            "softshell_body_copy_triangles",
+            body,
+            out,
+            capacity,
+            out_len,
+            |b| b.triangles().len() * 3,
+            |b, dst| {
+                for (chunk, t) in dst.chunks_exact_mut(3).zip(b.triangles()) {
+                    chunk.copy_from_slice(t);
+                }
+            },
+        )
+    }
+    #[cfg(not(feature = "body"))]
+    {
+        let _ = (out, capacity, out_len);
+        handle_read("softshell_body_copy_triangles", body, "body", |_| Err(unsupported()))
+    }
+}
+
+/// Copies, for each vertex, the input-mesh vertex it was split from (one uint32_t per vertex;
+/// the identity before any fracture). Vertex indices are stable: fracture appends vertices and
+/// never renumbers. Buffer rules of `softshell_body_copy_positions` (counts in uint32_t).
+///
+/// # Safety
+/// As `softshell_body_copy_triangles`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_copy_vertex_origins(
+    body: *const SoftshellBody,
+    out: *mut u32,
+    capacity: usize,
+    out_len: *mut usize,
+) -> SoftshellStatus {
+    #[cfg(feature = "body")]
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        copy_from(
+            "softshell_body_copy_vertex_origins",
+            body,
+            out,
+            capacity,
+            out_len,
+            |b| b.positions().len(),
+            |b, dst| {
+                for (i, d) in dst.iter_mut().enumerate() {
+                    *d = b.vertex_origin(i);
+                }
+            },
+        )
+    }
+    #[cfg(not(feature = "body"))]
+    {
+        let _ = (out, capacity, out_len);
+        handle_read("softshell_body_copy_vertex_origins", body, "body", |_| Err(unsupported()))
+    }
+}
+
+/// Copies, for each triangle, its connected piece (fragment) in `0..fragment_count` (one
+/// uint32_t per triangle). Buffer rules of `softshell_body_copy_positions` (counts in uint32_t).
+///
+/// # Safety
+/// As `softshell_body_copy_triangles`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_copy_fragment_ids(
+    body: *const SoftshellBody,
+    out: *mut u32,
+    capacity: usize,
+    out_len: *mut usize,
+) -> SoftshellStatus {
+    #[cfg(feature = "body")]
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        copy_from(
+            "softshell_body_copy_fragment_ids",
+            body,
+            out,
+            capacity,
+            out_len,
+            |b| b.fragment_ids().len(),
+            |b, dst| dst.copy_from_slice(b.fragment_ids()),
+        )
+    }
+    #[cfg(not(feature = "body"))]
+    {
+        let _ = (out, capacity, out_len);
+        handle_read("softshell_body_copy_fragment_ids", body, "body", |_| Err(unsupported()))
+    }
+}

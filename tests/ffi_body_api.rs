@@ -1,0 +1,209 @@
+//! The soft body's C ABI contract: defs and their validation, NULLs, indices, non-finite inputs,
+//! buffers, memory that is not allocated for unused features, determinism across thread counts.
+#![cfg(feature = "body")]
+
+mod body_util;
+
+use body_util::*;
+use softshell::ffi::SoftshellStatus;
+use softshell::ffi::body::*;
+
+fn ball() -> (Vec<f32>, Vec<u32>) {
+    icosphere(2, 0.5)
+}
+
+#[test]
+fn default_def_has_the_documented_values() {
+    let def = softshell_body_def_default();
+    assert_eq!(def.time_step, 1.0 / 60.0);
+    assert_eq!(def.integrator, SOFTSHELL_INTEGRATOR_IMPLICIT_EULER);
+    assert_eq!(def.gravity, [0.0, -9.81, 0.0]);
+    assert_eq!((def.gas_amount, def.break_strain, def.break_force), (0.0, 0.0, 0.0));
+    assert_eq!(def.substeps, 1);
+}
+
+#[test]
+fn bad_defs_are_refused_with_the_field_named() {
+    let (p, t) = ball();
+    let mut zeroed: SoftshellBodyDef = unsafe { std::mem::zeroed() };
+    zeroed.time_step = 0.01;
+    let (status, message) = try_body(&p, &t, &zeroed).err().unwrap();
+    assert_eq!(status, SoftshellStatus::InvalidArgument);
+    assert!(message.contains("softshell_body_def_default"), "{message}");
+    let cases: Vec<(&str, Box<dyn Fn(&mut SoftshellBodyDef)>)> = vec![
+        ("time_step", Box::new(|d| d.time_step = f32::NAN)),
+        ("time_step", Box::new(|d| d.time_step = 0.0)),
+        ("substeps", Box::new(|d| d.substeps = 0)),
+        ("integrator", Box::new(|d| d.integrator = 99)),
+        ("total_mass", Box::new(|d| d.total_mass = -1.0)),
+        ("spring_stiffness", Box::new(|d| d.spring_stiffness = f32::INFINITY)),
+        ("gas_amount", Box::new(|d| d.gas_amount = -5.0)),
+        ("gravity[1]", Box::new(|d| d.gravity[1] = f32::NAN)),
+        ("wind[2]", Box::new(|d| d.wind[2] = f32::INFINITY)),
+        ("restitution", Box::new(|d| d.restitution = 1.5)),
+        ("break_strain", Box::new(|d| d.break_strain = -0.1)),
+        ("threads", Box::new(|d| d.threads = 1000)),
+        ("iterations", Box::new(|d| d.iterations = 0)),
+    ];
+    for (field, edit) in cases {
+        let mut def = softshell_body_def_default();
+        edit(&mut def);
+        let (status, message) = try_body(&p, &t, &def).err().unwrap_or_else(|| panic!("{field} accepted"));
+        assert_eq!(status, SoftshellStatus::InvalidArgument, "{field}");
+        assert!(message.contains(field), "{field}: {message}");
+    }
+}
+
+#[test]
+fn gas_needs_a_closed_mesh_and_cloth_needs_none() {
+    let (p, t) = cloth(5, 1.0);
+    let mut def = softshell_body_def_default();
+    assert!(try_body(&p, &t, &def).is_ok());
+    def.gas_amount = 10.0;
+    let (status, message) = try_body(&p, &t, &def).err().unwrap();
+    assert_eq!(status, SoftshellStatus::InvalidMesh);
+    assert!(message.contains("closed"), "{message}");
+    // An inward-wound ball is refused with gas.
+    let (p, t) = ball();
+    let flipped: Vec<u32> = t.chunks_exact(3).flat_map(|c| [c[0], c[2], c[1]]).collect();
+    let (status, message) = try_body(&p, &flipped, &def).err().unwrap();
+    assert_eq!(status, SoftshellStatus::InvalidMesh);
+    assert!(message.contains("winding"), "{message}");
+}
+
+#[test]
+fn nulls_indices_and_non_finite_inputs_change_nothing() {
+    let (p, t) = ball();
+    let mesh = Mesh::new(&p, &t);
+    let def = softshell_body_def_default();
+    let mut out = std::ptr::null_mut();
+    // SAFETY: NULL arguments are documented to be refused.
+    unsafe {
+        assert_eq!(softshell_body_new(std::ptr::null(), &def, &mut out), SoftshellStatus::NullArgument);
+        assert_eq!(softshell_body_new(mesh.0, std::ptr::null(), &mut out), SoftshellStatus::NullArgument);
+        assert_eq!(softshell_body_new(mesh.0, &def, std::ptr::null_mut()), SoftshellStatus::NullArgument);
+        assert!(out.is_null());
+        assert_eq!(softshell_body_step(std::ptr::null_mut(), std::ptr::null_mut()), SoftshellStatus::NullArgument);
+        assert_eq!(softshell_body_vertex_count(std::ptr::null()), 0);
+        assert_eq!(softshell_body_triangle_count(std::ptr::null()), 0);
+        assert_eq!(softshell_body_fragment_count(std::ptr::null()), 0);
+        assert_eq!(softshell_body_topology_generation(std::ptr::null()), 0);
+        assert_eq!(softshell_body_memory_bytes(std::ptr::null()), 0);
+        softshell_body_free(std::ptr::null_mut());
+    }
+    let body = body(&p, &t, &def);
+    let before = snapshot(&body);
+    let n = before.vertex_count() as u32;
+    // SAFETY: live body; bad values are documented to be refused.
+    unsafe {
+        assert_eq!(softshell_body_pin_vertex(body.0, n), SoftshellStatus::InvalidArgument);
+        assert!(last_error().contains(&n.to_string()));
+        let nan = [0.0, f32::NAN, 0.0];
+        assert_eq!(softshell_body_apply_impulse(body.0, 0, nan.as_ptr()), SoftshellStatus::InvalidArgument);
+        assert_eq!(softshell_body_apply_impulse(body.0, n, [1.0f32, 0.0, 0.0].as_ptr()), SoftshellStatus::InvalidArgument);
+        assert_eq!(softshell_body_apply_impulse(body.0, 0, std::ptr::null()), SoftshellStatus::NullArgument);
+        assert_eq!(
+            softshell_body_add_plane_obstacle(body.0, [0.0f32; 3].as_ptr(), [0.0f32; 3].as_ptr()),
+            SoftshellStatus::InvalidArgument
+        );
+        assert_eq!(softshell_body_add_sphere_obstacle(body.0, [0.0f32; 3].as_ptr(), 0.0), SoftshellStatus::InvalidArgument);
+        assert_eq!(softshell_body_break_edge(body.0, 0, 0), SoftshellStatus::InvalidArgument);
+        assert_eq!(softshell_body_break_edge(body.0, 0, n + 5), SoftshellStatus::InvalidArgument);
+        // Two vertices that are not neighbours.
+        let far = (0..n).max_by(|&a, &b| before.position(a as usize)[1].total_cmp(&before.position(b as usize)[1])).unwrap();
+        let low = (0..n).min_by(|&a, &b| before.position(a as usize)[1].total_cmp(&before.position(b as usize)[1])).unwrap();
+        assert_eq!(softshell_body_break_edge(body.0, far, low), SoftshellStatus::InvalidArgument);
+        assert!(last_error().contains("not joined by a spring"), "{}", last_error());
+        // A step with NULL stats is fine.
+        assert_eq!(softshell_body_step(body.0, std::ptr::null_mut()), SoftshellStatus::Ok);
+    }
+    let after = snapshot(&body);
+    assert_eq!(after.generation, before.generation, "a refused call changed the topology");
+    assert_eq!(after.vertex_count(), before.vertex_count());
+}
+
+#[test]
+fn obstacles_pins_and_impulses_act() {
+    let (mut p, t) = ball();
+    for c in p.chunks_exact_mut(3) {
+        c[1] += 1.0;
+    }
+    let mut def = softshell_body_def_default();
+    def.gas_amount = 20.0;
+    def.spring_damping = 0.2;
+    let body = body(&p, &t, &def);
+    // SAFETY: live body, float[3] arguments.
+    unsafe {
+        assert_eq!(softshell_body_add_plane_obstacle(body.0, [0.0f32, 0.2, 0.0].as_ptr(), [0.0f32, 2.0, 0.0].as_ptr()), SoftshellStatus::Ok);
+        assert_eq!(softshell_body_add_sphere_obstacle(body.0, [3.0f32, 0.0, 0.0].as_ptr(), 1.0), SoftshellStatus::Ok);
+        assert_eq!(softshell_body_apply_impulse(body.0, 0, [0.0f32, 0.0, 0.01].as_ptr()), SoftshellStatus::Ok);
+    }
+    let s = snapshot(&body);
+    assert!(s.velocities[2] > 0.0, "the impulse changed the velocity");
+    for _ in 0..120 {
+        step(&body);
+    }
+    let s = snapshot(&body);
+    let lowest = s.positions.chunks_exact(3).map(|c| c[1]).fold(f32::INFINITY, f32::min);
+    assert!(lowest > 0.19, "the plane at y = 0.2 holds the ball ({lowest})");
+}
+
+#[test]
+fn nothing_is_allocated_for_gas_or_fracture_a_scene_does_not_use() {
+    let (p, t) = ball();
+    let plain = softshell_body_def_default();
+    let mut gas = plain;
+    gas.gas_amount = 10.0;
+    let mut fracture = plain;
+    fracture.break_strain = 0.5;
+    let mut core = plain;
+    core.break_force = 100.0;
+    let (m_plain, m_gas, m_fracture, m_core) = (
+        memory(&body(&p, &t, &plain)),
+        memory(&body(&p, &t, &gas)),
+        memory(&body(&p, &t, &fracture)),
+        memory(&body(&p, &t, &core)),
+    );
+    println!("memory: plain {m_plain}, gas {m_gas}, fracture {m_fracture}, cores {m_core}");
+    let vertices = p.len() / 3;
+    // Gas bookkeeping is at least a fragment per vertex; fracture at least origins and marks.
+    assert!(m_gas >= m_plain + 4 * vertices, "gas: {m_gas} vs {m_plain}");
+    assert!(m_fracture >= m_plain + 4 * vertices, "fracture: {m_fracture} vs {m_plain}");
+    assert_eq!(m_fracture, m_core);
+    // A step allocates scratch, but none for gas or fracture.
+    let a = body(&p, &t, &plain);
+    let b = body(&p, &t, &gas);
+    step(&a);
+    step(&b);
+    assert!(memory(&b) > memory(&a));
+    // Breaking an edge by hand allocates the fracture bookkeeping then, not before.
+    let before = memory(&a);
+    let s = snapshot(&a);
+    // SAFETY: live body.
+    assert_eq!(unsafe { softshell_body_break_edge(a.0, s.triangles[0], s.triangles[1]) }, SoftshellStatus::Ok);
+    assert!(memory(&a) > before);
+}
+
+#[test]
+fn results_do_not_depend_on_the_thread_count() {
+    let (p, t) = ball();
+    let run = |threads: u32, integrator: u32| {
+        let mut def = softshell_body_def_default();
+        def.threads = threads;
+        def.integrator = integrator;
+        def.gas_amount = 30.0;
+        def.break_strain = 0.08;
+        def.substeps = 2;
+        let body = body(&p, &t, &def);
+        for _ in 0..60 {
+            step(&body);
+        }
+        let s = snapshot(&body);
+        (s.positions, s.triangles)
+    };
+    for integrator in [SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, SOFTSHELL_INTEGRATOR_XPBD] {
+        let one = run(1, integrator);
+        assert_eq!(one, run(2, integrator));
+        assert_eq!(one, run(0, integrator));
+    }
+}

@@ -1,0 +1,65 @@
+//! A gas-filled ball dropped on the ground stays inflated and comes to rest (through the C ABI),
+//! with every integrator that is stable at the scene's time step.
+#![cfg(feature = "body")]
+
+mod body_util;
+
+use body_util::*;
+use softshell::ffi::body::*;
+
+fn ball_def(integrator: u32) -> SoftshellBodyDef {
+    let mut def = softshell_body_def_default();
+    def.integrator = integrator;
+    def.total_mass = 1.0;
+    def.spring_stiffness = 1000.0;
+    def.spring_damping = 0.5;
+    def.gas_amount = 500.0;
+    def.ground = true;
+    def.ground_height = 0.0;
+    def.friction = 0.5;
+    def
+}
+
+fn drop_ball(integrator: u32, substeps: u32) -> (f64, f64, f64) {
+    let (mut positions, triangles) = icosphere(3, 1.0);
+    for p in positions.chunks_exact_mut(3) {
+        p[1] += 1.5; // bottom at 0.5 m above the ground
+    }
+    let mut def = ball_def(integrator);
+    def.substeps = substeps;
+    let body = body(&positions, &triangles, &def);
+    let v0 = step(&body).volume;
+    let mut last = step(&body);
+    let mut min_y = f32::INFINITY;
+    for _ in 0..600 {
+        last = step(&body);
+        let s = snapshot(&body);
+        min_y = min_y.min(s.positions.chunks_exact(3).map(|p| p[1]).fold(f32::INFINITY, f32::min));
+    }
+    let s = snapshot(&body);
+    println!(
+        "integrator {integrator}: V/V0 {:.4}, kinetic {:.3e} J, centre y {:.3}, lowest y {min_y:.4}, drift {:.3e} J",
+        last.volume / v0,
+        last.kinetic_energy,
+        s.center_y(),
+        last.energy_drift
+    );
+    assert!(min_y > -0.05, "the ball sank into the ground ({min_y})");
+    (last.volume / v0, last.kinetic_energy, s.center_y())
+}
+
+#[test]
+fn ball_dropped_on_the_ground_stays_inflated_and_comes_to_rest_implicit() {
+    let (ratio, kinetic, center) = drop_ball(SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1);
+    assert!(ratio > 0.9, "the ball lost its volume: V/V0 = {ratio}");
+    assert!(kinetic < 1e-3, "the ball is still moving: {kinetic} J");
+    assert!(center > 0.8 && center < 1.2, "centre at {center}");
+}
+
+#[test]
+fn ball_dropped_on_the_ground_stays_inflated_and_comes_to_rest_xpbd() {
+    let (ratio, kinetic, center) = drop_ball(SOFTSHELL_INTEGRATOR_XPBD, 10);
+    assert!(ratio > 0.9, "the ball lost its volume: V/V0 = {ratio}");
+    assert!(kinetic < 0.2, "the ball is still moving: {kinetic} J");
+    assert!(center > 0.8 && center < 1.2, "centre at {center}");
+}
