@@ -16,10 +16,10 @@ pub mod body;
 pub mod collision;
 pub mod error;
 pub mod ffi;
-#[cfg(feature = "shell")]
-pub mod material;
 #[cfg(feature = "lattice")]
 pub mod lattice;
+#[cfg(feature = "shell")]
+pub mod material;
 pub mod mesh;
 pub mod parallel;
 #[cfg(feature = "shell")]
