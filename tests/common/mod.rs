@@ -2,7 +2,9 @@
 //! library's Rust internals.
 #![allow(dead_code)]
 
-use std::ffi::{CStr, CString};
+use std::ffi::CStr;
+#[cfg(feature = "obj")]
+use std::ffi::CString;
 use std::path::PathBuf;
 
 use softshell::ffi::mesh::*;
@@ -20,14 +22,33 @@ pub fn data_path(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data").join(name)
 }
 
-/// Loads `data/<name>` through the C ABI; panics with the library's message on failure.
+/// Loads `data/<name>` through the C ABI (`softshell_mesh_load_obj`); panics with the library's
+/// message on failure. Without the `obj` feature the test reads the plain `v`/`f` lines itself and
+/// goes through `softshell_mesh_from_arrays`, so the simulators' tests run in every build.
 pub fn load_data_mesh(name: &str) -> *mut SoftshellMesh {
-    let path = CString::new(data_path(name).to_str().unwrap()).unwrap();
-    let mut mesh = std::ptr::null_mut();
-    // SAFETY: valid path and out-pointer.
-    let status = unsafe { softshell_mesh_load_obj(path.as_ptr(), &mut mesh) };
-    assert_eq!(status, SoftshellStatus::Ok, "loading {name}: {}", last_error());
-    mesh
+    #[cfg(feature = "obj")]
+    {
+        let path = CString::new(data_path(name).to_str().unwrap()).unwrap();
+        let mut mesh = std::ptr::null_mut();
+        // SAFETY: valid path and out-pointer.
+        let status = unsafe { softshell_mesh_load_obj(path.as_ptr(), &mut mesh) };
+        assert_eq!(status, SoftshellStatus::Ok, "loading {name}: {}", last_error());
+        mesh
+    }
+    #[cfg(not(feature = "obj"))]
+    {
+        let text = std::fs::read_to_string(data_path(name)).unwrap();
+        let (mut positions, mut triangles) = (Vec::new(), Vec::new());
+        for line in text.lines() {
+            let mut words = line.split_whitespace();
+            match words.next() {
+                Some("v") => positions.extend(words.take(3).map(|w| w.parse::<f32>().unwrap())),
+                Some("f") => triangles.extend(words.map(|w| w.parse::<u32>().unwrap() - 1)),
+                _ => {}
+            }
+        }
+        mesh_from(&positions, &triangles).unwrap_or_else(|e| panic!("loading {name}: {e:?}"))
+    }
 }
 
 /// Creates a mesh from flat arrays through the C ABI.
