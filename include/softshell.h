@@ -35,6 +35,11 @@
 // by the iteration count and Young's modulus has no effect (for reproducing the paper).
 #define SOFTSHELL_SOLVER_PBD 1
 
+// `SoftshellShellDef.solver`: plain PBD edge-distance constraints instead of membrane energies
+// (the paper's baseline, for comparisons: triangles may shear and change area freely). The
+// membrane energy is still measured for the stats.
+#define SOFTSHELL_SOLVER_PBD_DISTANCE 2
+
 // `SoftshellShellDef.material`: Saint Venant-Kirchhoff (the default and the paper's).
 #define SOFTSHELL_MATERIAL_STVK 0
 
@@ -188,7 +193,8 @@ typedef struct SoftshellShellDef {
   uint32_t substeps;
   // Gauss-Seidel iterations per substep, 1..=1000. Default 5 (the paper's).
   uint32_t iterations;
-  // `SOFTSHELL_SOLVER_XPBD` (default) or `SOFTSHELL_SOLVER_PBD` (the paper's form).
+  // `SOFTSHELL_SOLVER_XPBD` (default), `SOFTSHELL_SOLVER_PBD` (the paper's form) or
+  // `SOFTSHELL_SOLVER_PBD_DISTANCE` (edge-distance baseline).
   uint32_t solver;
   // Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.5.
   float pressure;
@@ -234,13 +240,14 @@ typedef struct SoftshellShellDef {
 typedef struct SoftshellAnisotropyDef {
   // `SOFTSHELL_ANISOTROPY_ARAP` (default), `_STVK` or `_SQRT`.
   uint32_t energy;
-  // Fibre stiffness mu, Pa, in [0, 1e12]. Default 10000 (10 times the default Young's
-  // modulus).
+  // Fibre stiffness mu, Pa, in [0, 1e12]. Default 1000 (the default Young's modulus).
   float stiffness;
   // Inward push k_A (paper section 3.3), dimensionless, in [0, 1e6]: each vertex gradient of
   // the fibre constraint gets `+ k_A sqrt(A0) n` (n the face's outward unit normal, A0 its rest
   // area, so the push does not depend on the mesh scale), which turns corrections into an
-  // inward motion of the region. Default 0.5.
+  // inward motion of the region. The push acts as long as the fibre is
+  // strained, so large values make the region cave through the opposite side (without the
+  // collision stage). Default 0.003.
   float inward_push;
   // Target stretch L along the fibre, in (0, 1]: 1 = the paper's energies, below 1 = active
   // contraction (the fibre wants to shorten to L). Default 1.

@@ -17,6 +17,10 @@ pub const SOFTSHELL_SOLVER_XPBD: u32 = 0;
 /// `SoftshellShellDef.solver`: the paper's plain PBD energy constraints `C = W`: stiffness is set
 /// by the iteration count and Young's modulus has no effect (for reproducing the paper).
 pub const SOFTSHELL_SOLVER_PBD: u32 = 1;
+/// `SoftshellShellDef.solver`: plain PBD edge-distance constraints instead of membrane energies
+/// (the paper's baseline, for comparisons: triangles may shear and change area freely). The
+/// membrane energy is still measured for the stats.
+pub const SOFTSHELL_SOLVER_PBD_DISTANCE: u32 = 2;
 
 /// `SoftshellShellDef.material`: Saint Venant-Kirchhoff (the default and the paper's).
 pub const SOFTSHELL_MATERIAL_STVK: u32 = 0;
@@ -67,7 +71,8 @@ pub struct SoftshellShellDef {
     pub substeps: u32,
     /// Gauss-Seidel iterations per substep, 1..=1000. Default 5 (the paper's).
     pub iterations: u32,
-    /// `SOFTSHELL_SOLVER_XPBD` (default) or `SOFTSHELL_SOLVER_PBD` (the paper's form).
+    /// `SOFTSHELL_SOLVER_XPBD` (default), `SOFTSHELL_SOLVER_PBD` (the paper's form) or
+    /// `SOFTSHELL_SOLVER_PBD_DISTANCE` (edge-distance baseline).
     pub solver: u32,
     /// Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.5.
     pub pressure: f32,
@@ -115,13 +120,14 @@ pub struct SoftshellShellDef {
 pub struct SoftshellAnisotropyDef {
     /// `SOFTSHELL_ANISOTROPY_ARAP` (default), `_STVK` or `_SQRT`.
     pub energy: u32,
-    /// Fibre stiffness mu, Pa, in [0, 1e12]. Default 10000 (10 times the default Young's
-    /// modulus).
+    /// Fibre stiffness mu, Pa, in [0, 1e12]. Default 1000 (the default Young's modulus).
     pub stiffness: f32,
     /// Inward push k_A (paper section 3.3), dimensionless, in [0, 1e6]: each vertex gradient of
     /// the fibre constraint gets `+ k_A sqrt(A0) n` (n the face's outward unit normal, A0 its rest
     /// area, so the push does not depend on the mesh scale), which turns corrections into an
-    /// inward motion of the region. Default 0.5.
+    /// inward motion of the region. The push acts as long as the fibre is
+    /// strained, so large values make the region cave through the opposite side (without the
+    /// collision stage). Default 0.003.
     pub inward_push: f32,
     /// Target stretch L along the fibre, in (0, 1]: 1 = the paper's energies, below 1 = active
     /// contraction (the fibre wants to shorten to L). Default 1.
@@ -221,8 +227,8 @@ pub extern "C" fn softshell_shell_def_default() -> SoftshellShellDef {
 pub extern "C" fn softshell_anisotropy_def_default() -> SoftshellAnisotropyDef {
     SoftshellAnisotropyDef {
         energy: SOFTSHELL_ANISOTROPY_ARAP,
-        stiffness: 10000.0,
-        inward_push: 0.5,
+        stiffness: 1000.0,
+        inward_push: 0.003,
         target_stretch: 1.0,
         direction: [0.0; 3],
         internal_cookie: ANISOTROPY_DEF_COOKIE,
@@ -256,6 +262,7 @@ mod convert {
             match v {
                 SOFTSHELL_SOLVER_XPBD => Ok(SolverKind::Xpbd),
                 SOFTSHELL_SOLVER_PBD => Ok(SolverKind::Pbd),
+                SOFTSHELL_SOLVER_PBD_DISTANCE => Ok(SolverKind::PbdDistance),
                 _ => Err(()),
             }
         }
@@ -305,7 +312,11 @@ mod convert {
         check_positive("time_step", def.time_step, 1.0)?;
         check_count("substeps", def.substeps, 1, 1000)?;
         check_count("iterations", def.iterations, 1, 1000)?;
-        let solver = arg_kind(def.solver, "solver", "SOFTSHELL_SOLVER_XPBD (0), SOFTSHELL_SOLVER_PBD (1)")?;
+        let solver = arg_kind(
+            def.solver,
+            "solver",
+            "SOFTSHELL_SOLVER_XPBD (0), SOFTSHELL_SOLVER_PBD (1), SOFTSHELL_SOLVER_PBD_DISTANCE (2)",
+        )?;
         check_range("pressure", def.pressure, -1e12, 1e12)?;
         let material = arg_kind(
             def.material,

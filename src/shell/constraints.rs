@@ -220,3 +220,29 @@ impl Anisotropics {
             + vec_bytes(&self.colours)
     }
 }
+
+/// Edge-distance constraints (the paper's baseline), one per edge, sorted by colour. Built only
+/// for the distance solver.
+#[derive(Debug, Default)]
+pub(crate) struct Edges {
+    pub idx: Vec<[u32; 2]>,
+    pub rest: Vec<f32>,
+    pub colours: Vec<usize>,
+}
+
+impl Edges {
+    pub(crate) fn build(rest: &[Vec3], topology: &Topology) -> Self {
+        let (order, colours) = colour_constraints(&topology.edges, rest.len());
+        let idx: Vec<[u32; 2]> = order.iter().map(|&e| topology.edges[e as usize]).collect();
+        let lengths = idx.iter().map(|&[a, b]| (rest[b as usize] - rest[a as usize]).length()).collect();
+        Edges { idx, rest: lengths, colours }
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.idx.len()
+    }
+
+    pub(crate) fn memory_bytes(&self) -> usize {
+        vec_bytes(&self.idx) + vec_bytes(&self.rest) + vec_bytes(&self.colours)
+    }
+}

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use super::constraints::{Anisotropics, Bendings, Membranes, Region};
+use super::constraints::{Anisotropics, Bendings, Edges, Membranes, Region};
 use super::exec::{REDUCE_CHUNK, Shared, chunk_partials, for_range};
 use super::settings::{AnisotropySettings, BendingKind, ShellSettings, SolverKind};
 use crate::error::{Error, ErrorKind, Result};
@@ -16,7 +16,8 @@ use crate::material::{Lame, Mat32, Material, anisotropic_energy, membrane_energy
 use crate::mesh::{CurvatureKind, Topology, TriMesh, bounding_box, require_closed_oriented_solid, vertex_curvature};
 use crate::parallel::WorkerPool;
 use crate::solver::{
-    bending_energy, deformation_gradient, pbd_energy_correction, scatter_stress, xpbd_energy_correction,
+    bending_energy, deformation_gradient, distance_correction, pbd_energy_correction, scatter_stress,
+    xpbd_energy_correction,
 };
 
 /// What one step did (SPEC 4: error measures beside the time).
@@ -90,6 +91,8 @@ struct State {
     x_backup: Vec<Vec3>,
     v_backup: Vec<Vec3>,
     membranes: Membranes,
+    /// Edge-distance constraints: only for the distance solver.
+    edges: Edges,
     lambda_membrane: Vec<f32>,
     bendings: Bendings,
     lambda_bending: Vec<f32>,
@@ -114,6 +117,8 @@ impl Shell {
         let triangles = mesh.triangles().to_vec();
         let n = rest.len();
         let membranes = Membranes::build(&rest, &triangles, settings.material == Material::Linear)?;
+        let edges =
+            if settings.solver == SolverKind::PbdDistance { Edges::build(&rest, topology) } else { Edges::default() };
         let bendings = match settings.bending {
             BendingKind::None => Bendings::default(),
             kind => Bendings::build(&rest, &triangles, topology, kind == BendingKind::IsometricRest),
@@ -129,7 +134,7 @@ impl Shell {
         }
         let inv_mass: Vec<f32> = mass.iter().map(|&m| if m > 0.0 { (1.0 / m) as f32 } else { 0.0 }).collect();
         let xpbd = settings.solver == SolverKind::Xpbd;
-        let largest = n.max(triangles.len()).max(bendings.len());
+        let largest = n.max(triangles.len()).max(bendings.len()).max(edges.len());
         let rest_volume = crate::mesh::signed_volume(&rest, &triangles);
         let diagonal = bounding_box(&rest).diagonal();
         let stats = ShellStats { volume: rest_volume, volume_ratio: 1.0, ..Default::default() };
@@ -145,6 +150,7 @@ impl Shell {
             lambda_membrane: if xpbd { vec![0.0; membranes.len()] } else { Vec::new() },
             lambda_bending: if xpbd { vec![0.0; bendings.len()] } else { Vec::new() },
             membranes,
+            edges,
             bendings,
             regions: Vec::new(),
             anisotropics: None,
@@ -206,7 +212,7 @@ impl Shell {
         let s = &mut self.state;
         s.regions.push(Region { faces: faces.to_vec(), settings });
         let aniso = Anisotropics::build(&s.rest, &s.triangles, &s.regions);
-        let largest = s.x.len().max(s.triangles.len()).max(s.bendings.len()).max(aniso.len());
+        let largest = s.x.len().max(s.triangles.len()).max(s.bendings.len()).max(s.edges.len()).max(aniso.len());
         s.partials.resize(largest.div_ceil(REDUCE_CHUNK), [0.0; 3]);
         s.lambda_aniso = if self.settings.solver == SolverKind::Xpbd { vec![0.0; aniso.len()] } else { Vec::new() };
         s.anisotropics = Some(aniso);
@@ -232,6 +238,7 @@ impl Shell {
             + b(&s.x_backup)
             + b(&s.v_backup)
             + s.membranes.memory_bytes()
+            + s.edges.memory_bytes()
             + b(&s.lambda_membrane)
             + s.bendings.memory_bytes()
             + b(&s.lambda_bending)
@@ -361,7 +368,11 @@ impl State {
             self.lambda_bending.fill(0.0);
             self.lambda_aniso.fill(0.0);
             for _ in 0..settings.iterations {
-                self.project_membranes(&coeff, parallel);
+                if settings.solver == SolverKind::PbdDistance {
+                    self.project_edges(parallel);
+                } else {
+                    self.project_membranes(&coeff, parallel);
+                }
                 if coeff.bending_coefficient > 0.0 {
                     self.project_bendings(&coeff, parallel);
                 }
@@ -432,7 +443,7 @@ impl State {
                             }
                             lambda.set(i, l + dl);
                         }
-                        SolverKind::Pbd => {
+                        SolverKind::Pbd | SolverKind::PbdDistance => {
                             if !pbd_energy_correction(energy, &grad, &inv, 1.0, &mut corr) {
                                 return;
                             }
@@ -441,6 +452,25 @@ impl State {
                     p.set(a, x[0] + corr[0]);
                     p.set(b, x[1] + corr[1]);
                     p.set(d, x[2] + corr[2]);
+                }
+            });
+        }
+    }
+
+    fn project_edges(&mut self, parallel: bool) {
+        let e = &self.edges;
+        let w = &self.inv_mass;
+        let p = Shared::new(&mut self.p);
+        for colour in e.colours.windows(2) {
+            for_range(parallel, colour[0], colour[1], |i| {
+                let [a, b] = e.idx[i].map(|k| k as usize);
+                // SAFETY: edges of one colour touch disjoint vertices.
+                unsafe {
+                    let (xa, xb) = (p.get(a), p.get(b));
+                    if let Some((da, db)) = distance_correction(xa, xb, w[a], w[b], e.rest[i]) {
+                        p.set(a, xa + da);
+                        p.set(b, xb + db);
+                    }
                 }
             });
         }
@@ -472,7 +502,7 @@ impl State {
                             }
                             lambda.set(i, l + dl);
                         }
-                        SolverKind::Pbd => {
+                        SolverKind::Pbd | SolverKind::PbdDistance => {
                             // The paper scales the PBD correction by kB (as Bender's library does).
                             if !pbd_energy_correction(energy, &grad, &inv, c.bending_coefficient, &mut corr) {
                                 return;
@@ -520,7 +550,7 @@ impl State {
                             }
                             lambda.set(i, l + dl);
                         }
-                        SolverKind::Pbd => {
+                        SolverKind::Pbd | SolverKind::PbdDistance => {
                             if !pbd_energy_correction(energy, &grad, &inv, 1.0, &mut corr) {
                                 return;
                             }
@@ -643,6 +673,21 @@ impl State {
         });
         let elastic = parts.iter().map(|s| s[0]).sum::<f64>();
         let mut residual = parts.iter().fold(0.0f64, |a, s| a.max(s[1]));
+        if c.solver == SolverKind::PbdDistance {
+            // The distance solver's own constraints: the largest relative edge-length error.
+            let e = &self.edges;
+            let parts = &mut self.partials[..e.len().div_ceil(REDUCE_CHUNK)];
+            chunk_partials(parallel, e.len(), parts, |s, end| {
+                let mut worst = 0.0f64;
+                for i in s..end {
+                    let [a, b] = e.idx[i];
+                    let len = (x[b as usize] - x[a as usize]).length();
+                    worst = worst.max(((len - e.rest[i]) / e.rest[i]).abs() as f64);
+                }
+                [worst, 0.0, 0.0]
+            });
+            residual = parts.iter().fold(0.0f64, |a, s| a.max(s[0]));
+        }
 
         let mut bending = 0.0;
         if settings.bending != BendingKind::None {

@@ -7,10 +7,12 @@
 
 mod bending;
 mod colouring;
+mod distance;
 mod energy_constraint;
 mod triangle;
 
 pub use bending::{BendingRest, bending_energy, bending_rest};
 pub use colouring::colour_constraints;
+pub use distance::distance_correction;
 pub use energy_constraint::{pbd_energy_correction, xpbd_energy_correction};
 pub use triangle::{TriangleRest, deformation_gradient, scatter_stress, triangle_rest};
