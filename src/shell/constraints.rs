@@ -79,6 +79,9 @@ pub(crate) struct Bendings {
     /// `(x0, x1, x2, x3)`: the edge, then the opposite vertices.
     pub idx: Vec<[u32; 4]>,
     pub k: Vec<[f32; 4]>,
+    /// `w_i K_i` and `Σ w_i K_i²` (inverse masses are fixed), so projections gather no masses.
+    pub wk: Vec<[f32; 4]>,
+    pub wk2: Vec<f32>,
     pub q: Vec<f32>,
     /// Rest `Σ K_i X_i` in the stencil frame: only for the rest-preserving model.
     pub rest_local: Vec<Vec3>,
@@ -124,6 +127,17 @@ impl Bendings {
 
     pub(crate) fn len(&self) -> usize {
         self.idx.len()
+    }
+
+    /// Precomputes the mass-weighted coefficients from the inverse masses.
+    pub(crate) fn set_inverse_masses(&mut self, inv_mass: &[f32]) {
+        self.wk = self
+            .idx
+            .iter()
+            .zip(&self.k)
+            .map(|(idx, k)| [0, 1, 2, 3].map(|j| inv_mass[idx[j] as usize] * k[j]))
+            .collect();
+        self.wk2 = self.wk.iter().zip(&self.k).map(|(wk, k)| (0..4).map(|j| wk[j] * k[j]).sum()).collect();
     }
 
     pub(crate) fn memory_bytes(&self) -> usize {

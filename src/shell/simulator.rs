@@ -16,8 +16,8 @@ use crate::material::{Lame, Mat32, Material, anisotropic_energy, membrane_energy
 use crate::mesh::{CurvatureKind, Topology, TriMesh, bounding_box, require_closed_oriented_solid, vertex_curvature};
 use crate::parallel::WorkerPool;
 use crate::solver::{
-    bending_energy, deformation_gradient, distance_correction, pbd_energy_correction, scatter_stress,
-    xpbd_energy_correction,
+    bending_energy, bending_projection, bending_residual, deformation_gradient, distance_correction,
+    pbd_energy_correction, scatter_stress, xpbd_energy_correction,
 };
 
 /// What one step did (SPEC 4: error measures beside the time).
@@ -119,7 +119,7 @@ impl Shell {
         let membranes = Membranes::build(&rest, &triangles, settings.material == Material::Linear)?;
         let edges =
             if settings.solver == SolverKind::PbdDistance { Edges::build(&rest, topology) } else { Edges::default() };
-        let bendings = match settings.bending {
+        let mut bendings = match settings.bending {
             BendingKind::None => Bendings::default(),
             kind => Bendings::build(&rest, &triangles, topology, kind == BendingKind::IsometricRest),
         };
@@ -133,6 +133,7 @@ impl Shell {
             }
         }
         let inv_mass: Vec<f32> = mass.iter().map(|&m| if m > 0.0 { (1.0 / m) as f32 } else { 0.0 }).collect();
+        bendings.set_inverse_masses(&inv_mass);
         let xpbd = settings.solver == SolverKind::Xpbd;
         let largest = n.max(triangles.len()).max(bendings.len()).max(edges.len());
         let rest_volume = crate::mesh::signed_volume(&rest, &triangles);
@@ -478,7 +479,6 @@ impl State {
 
     fn project_bendings(&mut self, c: &Coefficients, parallel: bool) {
         let s = &self.bendings;
-        let w = &self.inv_mass;
         let p = Shared::new(&mut self.p);
         let lambda = Shared::new(&mut self.lambda_bending);
         for colour in s.colours.windows(2) {
@@ -487,30 +487,27 @@ impl State {
                 // SAFETY: constraints of one colour touch disjoint vertices; lambda[i] is i's.
                 unsafe {
                     let x = idx.map(|k| p.get(k));
-                    let (energy, grad) = bending_stencil(s, i, &x, c.keep_rest);
-                    let inv = idx.map(|k| w[k]);
-                    let mut corr = [Vec3::ZERO; 4];
-                    match c.solver {
+                    let v = bending_residual(&x, &s.k[i], c.keep_rest.then(|| s.rest_local[i]));
+                    let q = s.q[i];
+                    let projection = match c.solver {
                         SolverKind::Xpbd => {
                             // SPEC 1.4 with W = kB E t (A0+A1)/2 · E_B: bending as stiff as
                             // stretching over one stencil when kB = 1.
-                            let alpha = 1.0 / (c.bending_scale * stencil_area(s.q[i]));
-                            let l = lambda.get(i);
-                            let dl = xpbd_energy_correction(energy, &grad, &inv, alpha, l, 1e-7, &mut corr);
-                            if dl == 0.0 {
-                                return;
-                            }
-                            lambda.set(i, l + dl);
+                            let alpha = 1.0 / (c.bending_scale * stencil_area(q));
+                            bending_projection(v, q, s.wk2[i], Some((alpha, lambda.get(i))), 0.0, 1e-7)
                         }
+                        // The paper scales the PBD correction by kB (as Bender's library does).
                         SolverKind::Pbd | SolverKind::PbdDistance => {
-                            // The paper scales the PBD correction by kB (as Bender's library does).
-                            if !pbd_energy_correction(energy, &grad, &inv, c.bending_coefficient, &mut corr) {
-                                return;
-                            }
+                            bending_projection(v, q, s.wk2[i], None, c.bending_coefficient, 1e-7)
                         }
+                    };
+                    let Some((scale, dlambda)) = projection else { return };
+                    if c.solver == SolverKind::Xpbd {
+                        lambda.set(i, lambda.get(i) + dlambda);
                     }
+                    let wk = &s.wk[i];
                     for k in 0..4 {
-                        p.set(idx[k], x[k] + corr[k]);
+                        p.set(idx[k], x[k] + v * (wk[k] * scale));
                     }
                 }
             });

@@ -30,26 +30,22 @@ fn cot(u: Vec3, v: Vec3) -> f32 {
 }
 
 /// The stencil's frame: unit edge direction, unit mean normal and their cross product; `None`
-/// when the two faces fold onto each other or collapse.
-#[inline]
+/// when the two faces fold onto each other or collapse. The normal
+/// `m = e0 × (x2 - x0) + (x3 - x0) × e0` is perpendicular to the edge by construction.
+#[inline(always)]
 fn frame(x: &[Vec3; 4]) -> Option<[Vec3; 3]> {
     let e0 = x[1] - x[0];
-    let len = e0.length();
-    if !(len > 0.0) {
+    let m = e0.cross(x[2] - x[0]) + (x[3] - x[0]).cross(e0);
+    let (l2, m2) = (e0.length_squared(), m.length_squared());
+    if !(l2 > 0.0) || !(m2 > 1e-24 * l2 * l2) {
         return None;
     }
-    let e = e0 / len;
-    let n = e0.cross(x[2] - x[0]) + (x[3] - x[0]).cross(e0);
-    let n = n - e * n.dot(e);
-    let n_len = n.length();
-    if !(n_len > 1e-12 * len * len) {
-        return None;
-    }
-    let n = n / n_len;
+    let (inv_l, inv_m) = (l2.sqrt().recip(), m2.sqrt().recip());
+    let (e, n) = (e0 * inv_l, m * inv_m);
     Some([e, n, e.cross(n)])
 }
 
-#[inline]
+#[inline(always)]
 fn stencil_vector(x: &[Vec3; 4], k: &[f32; 4]) -> Vec3 {
     // SPEC 1.4 precision: Σ K_i (x_i - x_0), never the expanded quadratic form.
     (x[1] - x[0]) * k[1] + (x[2] - x[0]) * k[2] + (x[3] - x[0]) * k[3]
@@ -73,19 +69,56 @@ pub fn bending_rest(x: [Vec3; 4]) -> Option<BendingRest> {
     Some(BendingRest { k, q: 3.0 / (a0 + a1), rest_local })
 }
 
+/// `v = Σ K_i x_i - target`: the paper's target 0 when `rest_local` is `None`, else the rest
+/// vector carried by the stencil's current frame. `E = q/2 |v|²`, `∂E/∂x_i = q K_i v`.
+#[inline(always)]
+pub fn bending_residual(x: &[Vec3; 4], k: &[f32; 4], rest_local: Option<Vec3>) -> Vec3 {
+    let v = stencil_vector(x, k);
+    match rest_local.and_then(|r| frame(x).map(|f| (r, f))) {
+        Some((r, [e, n, b])) => v - (e * r.x + n * r.y + b * r.z),
+        None => v,
+    }
+}
+
 /// Energy `E` and gradients of one stencil (see the module doc). `keep_rest` selects the
 /// rest-preserving target; `false` is the paper's flat-rest model.
-#[inline]
+#[inline(always)]
 pub fn bending_energy(x: &[Vec3; 4], rest: &BendingRest, keep_rest: bool) -> (f32, [Vec3; 4]) {
-    let mut v = stencil_vector(x, &rest.k);
-    if keep_rest {
-        if let Some([e, n, b]) = frame(x) {
-            v -= e * rest.rest_local.x + n * rest.rest_local.y + b * rest.rest_local.z;
-        }
-    }
+    let v = bending_residual(x, &rest.k, keep_rest.then_some(rest.rest_local));
     let energy = 0.5 * rest.q * v.length_squared();
     let qv = v * rest.q;
     (energy, [qv * rest.k[0], qv * rest.k[1], qv * rest.k[2], qv * rest.k[3]])
+}
+
+/// The energy constraints of SPEC 1.3 specialised to a bending stencil, whose gradients are all
+/// parallel to v: with `wk2 = Σ w_i K_i²`, both forms give `Δx_i = v · (w_i K_i · scale)`.
+/// XPBD (`alpha` = α̃, `lambda` accumulated): `C² = q|v|²`, `Δλ = -C²(C + α̃λ)/(q² |v|² wk2 + α̃ C²)`,
+/// `scale = q Δλ / C`. PBD (`alpha` = `None`, `stiffness` = kB): `scale = -kB / (2 wk2)`.
+/// Returns `(scale, Δλ)`, or `None` when the stencil is at rest (C below `min_c`) or immovable.
+#[inline(always)]
+pub fn bending_projection(
+    v: Vec3,
+    q: f32,
+    wk2: f32,
+    xpbd: Option<(f32, f32)>,
+    stiffness: f32,
+    min_c: f32,
+) -> Option<(f32, f32)> {
+    let vv = v.length_squared();
+    let c2 = q * vv;
+    if !(c2 > min_c * min_c) || !(wk2 > 0.0) {
+        return None;
+    }
+    match xpbd {
+        Some((alpha, lambda)) => {
+            let c = c2.sqrt();
+            let denom = q * q * vv * wk2 + alpha * c2;
+            // Δλ / C = -C (C + α̃λ)/denom: one division, no division by C.
+            let per_c = -c * (c + alpha * lambda) / denom;
+            Some((q * per_c, per_c * c))
+        }
+        None => Some((-stiffness / (2.0 * wk2), 0.0)),
+    }
 }
 
 #[cfg(test)]
@@ -142,6 +175,26 @@ mod tests {
                     "v{v} axis {axis}: {fd} vs {}",
                     g[v][axis]
                 );
+            }
+        }
+        // The specialised projection equals the generic energy constraints.
+        let inv = [1.0f32, 0.5, 2.0, 0.7];
+        let wk2: f32 = (0..4).map(|i| inv[i] * r.k[i] * r.k[i]).sum();
+        for keep in [false, true] {
+            let (energy, g) = bending_energy(&x, &r, keep);
+            let v = bending_residual(&x, &r.k, keep.then_some(r.rest_local));
+            let mut generic = [Vec3::ZERO; 4];
+            let dl = crate::solver::xpbd_energy_correction(energy, &g, &inv, 0.3, 0.1, 1e-9, &mut generic);
+            let (scale, dl2) = bending_projection(v, r.q, wk2, Some((0.3, 0.1)), 1.0, 1e-9).unwrap();
+            assert!((dl - dl2).abs() < 1e-4 * dl.abs().max(1e-6));
+            for i in 0..4 {
+                assert!((generic[i] - v * (inv[i] * r.k[i] * scale)).length() < 1e-4 * generic[i].length().max(1e-6));
+            }
+            let mut generic = [Vec3::ZERO; 4];
+            assert!(crate::solver::pbd_energy_correction(energy, &g, &inv, 0.3, &mut generic));
+            let (scale, _) = bending_projection(v, r.q, wk2, None, 0.3, 1e-9).unwrap();
+            for i in 0..4 {
+                assert!((generic[i] - v * (inv[i] * r.k[i] * scale)).length() < 1e-4 * generic[i].length().max(1e-6));
             }
         }
         // Rest-preserving form: the gradient with the frame rotation held fixed.

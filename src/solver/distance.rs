@@ -5,7 +5,7 @@
 use glam::Vec3;
 
 /// Corrections of the two ends, or `None` when the edge has collapsed or both ends are pinned.
-#[inline]
+#[inline(always)]
 pub fn distance_correction(x0: Vec3, x1: Vec3, w0: f32, w1: f32, rest: f32) -> Option<(Vec3, Vec3)> {
     let d = x1 - x0;
     let len = d.length();

@@ -14,7 +14,7 @@ const MIN_DENOMINATOR: f32 = 1e-30;
 /// The paper's PBD energy constraint (SPEC 1.3): `s = C / Σ w_j |∇_j C|²`,
 /// `Δx_i = -stiffness · s · w_i ∇_i C` with `C = energy`. Independent of the energy's scale.
 /// Returns `false` (and leaves `correction` untouched) when there is nothing to do.
-#[inline]
+#[inline(always)]
 pub fn pbd_energy_correction<const N: usize>(
     energy: f32,
     grad: &[Vec3; N],
@@ -38,7 +38,7 @@ pub fn pbd_energy_correction<const N: usize>(
 /// `energy` is Ŵ (unit modulus), `grad` its gradients, `alpha` = α̃ = 1/(k h²), `lambda` the
 /// accumulated multiplier of this step. Skips an element whose `C` is below `min_c` (at rest).
 /// Returns Δλ (0 when skipped, then `correction` is untouched).
-#[inline]
+#[inline(always)]
 pub fn xpbd_energy_correction<const N: usize>(
     energy: f32,
     grad: &[Vec3; N],
@@ -58,8 +58,9 @@ pub fn xpbd_energy_correction<const N: usize>(
     if !(denom > MIN_DENOMINATOR) {
         return 0.0;
     }
-    let dlambda = -c2 * (c + alpha * lambda) / denom;
-    let factor = dlambda / c;
+    // Δλ / C = -C (C + α̃λ)/denom: one division, none by C.
+    let factor = -c * (c + alpha * lambda) / denom;
+    let dlambda = factor * c;
     for i in 0..N {
         correction[i] = grad[i] * (inv_mass[i] * factor);
     }

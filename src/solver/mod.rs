@@ -11,7 +11,7 @@ mod distance;
 mod energy_constraint;
 mod triangle;
 
-pub use bending::{BendingRest, bending_energy, bending_rest};
+pub use bending::{BendingRest, bending_energy, bending_projection, bending_residual, bending_rest};
 pub use colouring::colour_constraints;
 pub use distance::distance_correction;
 pub use energy_constraint::{pbd_energy_correction, xpbd_energy_correction};
