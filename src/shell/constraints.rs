@@ -24,6 +24,8 @@ pub(crate) struct Membranes {
     pub basis: Vec<Mat32>,
     /// The mesh triangle of each constraint.
     pub face: Vec<u32>,
+    /// Inverse masses of the three corners (fixed), so projections gather no masses.
+    pub inv_mass: Vec<[f32; 3]>,
     /// Colour c is `colours[c]..colours[c + 1]`.
     pub colours: Vec<usize>,
 }
@@ -63,12 +65,18 @@ impl Membranes {
         self.tri.len()
     }
 
+    /// Copies the corners' inverse masses next to each constraint.
+    pub(crate) fn set_inverse_masses(&mut self, inv_mass: &[f32]) {
+        self.inv_mass = self.tri.iter().map(|t| t.map(|v| inv_mass[v as usize])).collect();
+    }
+
     pub(crate) fn memory_bytes(&self) -> usize {
         vec_bytes(&self.tri)
             + vec_bytes(&self.dm_inv)
             + vec_bytes(&self.area)
             + vec_bytes(&self.basis)
             + vec_bytes(&self.face)
+            + vec_bytes(&self.inv_mass)
             + vec_bytes(&self.colours)
     }
 }

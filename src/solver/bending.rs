@@ -8,7 +8,9 @@
 //! the gradient is taken (it changes only with the stencil's rigid motion, as in shape matching),
 //! so the energy is zero at the rest shape and after any rigid motion of the stencil.
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
+
+use super::wide::W3;
 
 /// Below this `|u × v|` a cotangent is taken as 0 (SPEC 1.4 guard).
 const MIN_CROSS: f32 = 1e-20;
@@ -121,6 +123,48 @@ pub fn bending_projection(
     }
 }
 
+/// [`bending_residual`] followed by [`bending_projection`] for four stencils at once (lanes).
+/// `x[k]` holds vertex k of every stencil, `k` the coefficients K1..K3, `rest` the rest vectors
+/// (`None`: the paper's flat target). Returns `(v, scale, Δλ, active)`: lane j is to be applied
+/// as `Δx_i = v_j · (w_i K_i · scale_j)` when bit j of `active` is set.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub fn bending_projection_wide(
+    x: &[W3; 4],
+    k: [Vec4; 3],
+    rest: Option<&W3>,
+    q: Vec4,
+    wk2: Vec4,
+    xpbd: Option<(Vec4, Vec4)>,
+    stiffness: f32,
+    min_c: f32,
+) -> (W3, Vec4, Vec4, u32) {
+    let (d1, d2, d3) = (x[1].sub(x[0]), x[2].sub(x[0]), x[3].sub(x[0]));
+    let mut v = d1.scale(k[0]).add(d2.scale(k[1])).add(d3.scale(k[2]));
+    if let Some(r) = rest {
+        let m = d1.cross(d2).add(d3.cross(d1));
+        let (l2, m2) = (d1.dot(d1), m.dot(m));
+        let valid = l2.cmpgt(Vec4::ZERO) & m2.cmpgt(Vec4::splat(1e-24) * l2 * l2);
+        let (inv_l, inv_m) = (l2.sqrt().recip(), m2.sqrt().recip());
+        let (e, n) = (d1.scale(inv_l), m.scale(inv_m));
+        let b = e.cross(n);
+        let target = e.scale(r.x).add(n.scale(r.y)).add(b.scale(r.z));
+        v = W3::select(valid, v.sub(target), v);
+    }
+    let vv = v.dot(v);
+    let c2 = q * vv;
+    let active = (c2.cmpgt(Vec4::splat(min_c * min_c)) & wk2.cmpgt(Vec4::ZERO)).bitmask();
+    match xpbd {
+        Some((alpha, lambda)) => {
+            let c = c2.sqrt();
+            let denom = q * q * vv * wk2 + alpha * c2;
+            let per_c = -c * (c + alpha * lambda) / denom;
+            (v, q * per_c, per_c * c, active)
+        }
+        None => (v, Vec4::splat(-stiffness) / (Vec4::splat(2.0) * wk2), Vec4::ZERO, active),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -184,7 +228,7 @@ mod tests {
             let (energy, g) = bending_energy(&x, &r, keep);
             let v = bending_residual(&x, &r.k, keep.then_some(r.rest_local));
             let mut generic = [Vec3::ZERO; 4];
-            let dl = crate::solver::xpbd_energy_correction(energy, &g, &inv, 0.3, 0.1, 1e-9, &mut generic);
+            let dl = crate::solver::xpbd_energy_correction(energy, &g, &inv, 0.3, 0.1, 1e-18, &mut generic);
             let (scale, dl2) = bending_projection(v, r.q, wk2, Some((0.3, 0.1)), 1.0, 1e-9).unwrap();
             assert!((dl - dl2).abs() < 1e-4 * dl.abs().max(1e-6));
             for i in 0..4 {
@@ -195,6 +239,36 @@ mod tests {
             let (scale, _) = bending_projection(v, r.q, wk2, None, 0.3, 1e-9).unwrap();
             for i in 0..4 {
                 assert!((generic[i] - v * (inv[i] * r.k[i] * scale)).length() < 1e-4 * generic[i].length().max(1e-6));
+            }
+        }
+        // Four lanes give what the scalar kernel gives, lane by lane.
+        let stencils = [x, x0, x.map(|p| p * 1.1), x.map(|p| p + Vec3::X)];
+        let wx: [W3; 4] = [0, 1, 2, 3].map(|v| W3::gather(stencils.map(|s| s[v])));
+        let kk = [Vec4::splat(r.k[1]), Vec4::splat(r.k[2]), Vec4::splat(r.k[3])];
+        for keep in [false, true] {
+            let rest = W3::gather([r.rest_local; 4]);
+            let xp = Some((Vec4::splat(0.3), Vec4::splat(0.1)));
+            let (v4, s4, l4, act) = bending_projection_wide(
+                &wx,
+                kk,
+                keep.then_some(&rest),
+                Vec4::splat(r.q),
+                Vec4::splat(wk2),
+                xp,
+                1.0,
+                1e-9,
+            );
+            for (j, st) in stencils.iter().enumerate() {
+                let v = bending_residual(st, &r.k, keep.then_some(r.rest_local));
+                match bending_projection(v, r.q, wk2, Some((0.3, 0.1)), 1.0, 1e-9) {
+                    Some((scale, dl)) => {
+                        assert!(act & (1 << j) != 0);
+                        assert!((v4.lane(j) - v).length() <= 1e-6 * v.length().max(1e-6), "lane {j}");
+                        assert!((s4[j] - scale).abs() <= 1e-5 * scale.abs().max(1e-9));
+                        assert!((l4[j] - dl).abs() <= 1e-5 * dl.abs().max(1e-9));
+                    }
+                    None => assert!(act & (1 << j) == 0),
+                }
             }
         }
         // Rest-preserving form: the gradient with the frame rotation held fixed.

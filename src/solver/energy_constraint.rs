@@ -36,7 +36,7 @@ pub fn pbd_energy_correction<const N: usize>(
 /// The XPBD energy constraint of SPEC 1.3 with `W = k Ŵ`: `C = sqrt(2 Ŵ)`,
 /// `Δλ = -C² (C + α̃ λ) / (Σ_i w_i |∇_i Ŵ|² + α̃ C²)`, `Δx_i = w_i ∇_i Ŵ (Δλ / C)`.
 /// `energy` is Ŵ (unit modulus), `grad` its gradients, `alpha` = α̃ = 1/(k h²), `lambda` the
-/// accumulated multiplier of this step. Skips an element whose `C` is below `min_c` (at rest).
+/// accumulated multiplier of this step. Skips an element whose `C²` is below `min_c2` (at rest).
 /// Returns Δλ (0 when skipped, then `correction` is untouched).
 #[inline(always)]
 pub fn xpbd_energy_correction<const N: usize>(
@@ -45,11 +45,11 @@ pub fn xpbd_energy_correction<const N: usize>(
     inv_mass: &[f32; N],
     alpha: f32,
     lambda: f32,
-    min_c: f32,
+    min_c2: f32,
     correction: &mut [Vec3; N],
 ) -> f32 {
     let c2 = 2.0 * energy;
-    if !(c2 > min_c * min_c) {
+    if !(c2 > min_c2) {
         return 0.0;
     }
     let c = c2.sqrt();
@@ -85,7 +85,7 @@ mod tests {
         let x = [Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0)];
         let (w, g) = spring(x, 1.0);
         let mut corr = [Vec3::ZERO; 2];
-        let dl = xpbd_energy_correction(w, &g, &[1.0, 1.0], 0.0, 0.0, 1e-9, &mut corr);
+        let dl = xpbd_energy_correction(w, &g, &[1.0, 1.0], 0.0, 0.0, 1e-18, &mut corr);
         assert!(dl < 0.0);
         let len = (x[1] + corr[1] - x[0] - corr[0]).length();
         assert!((len - 1.0).abs() < 1e-6, "{len}");
@@ -101,7 +101,7 @@ mod tests {
         for _ in 0..50 {
             let (w, g) = spring(x, 1.0);
             let mut corr = [Vec3::ZERO; 2];
-            lambda += xpbd_energy_correction(w, &g, &[0.0, 1.0], 1.0, lambda, 1e-9, &mut corr);
+            lambda += xpbd_energy_correction(w, &g, &[0.0, 1.0], 1.0, lambda, 1e-18, &mut corr);
             x[1] += corr[1];
         }
         assert!((x[1].x - 1.5).abs() < 1e-4, "{}", x[1].x);
@@ -117,7 +117,7 @@ mod tests {
         assert!((a[1] - b[1]).length() < 1e-6);
         let mut c = [Vec3::ZERO; 2];
         assert!(!pbd_energy_correction(1.0, &[Vec3::ZERO; 2], &[1.0, 1.0], 1.0, &mut c));
-        assert_eq!(xpbd_energy_correction(1.0, &[Vec3::ZERO; 2], &[1.0, 1.0], 0.0, 0.0, 1e-9, &mut c), 0.0);
-        assert_eq!(xpbd_energy_correction(0.0, &g, &[1.0, 1.0], 0.0, 0.0, 1e-9, &mut c), 0.0);
+        assert_eq!(xpbd_energy_correction(1.0, &[Vec3::ZERO; 2], &[1.0, 1.0], 0.0, 0.0, 1e-18, &mut c), 0.0);
+        assert_eq!(xpbd_energy_correction(0.0, &g, &[1.0, 1.0], 0.0, 0.0, 1e-18, &mut c), 0.0);
     }
 }
