@@ -9,7 +9,7 @@ use std::time::Instant;
 use glam::{Vec3, Vec4};
 
 use super::constraints::{Anisotropics, Bendings, Edges, Membranes, Region};
-use super::exec::{REDUCE_CHUNK, Shared, chunk_partials, for_range};
+use super::exec::{MIN_PARALLEL, REDUCE_CHUNK, Shared, chunk_partials, for_range, for_range_min};
 use super::settings::{AnisotropySettings, BendingKind, ShellSettings, SolverKind};
 use crate::error::{Error, ErrorKind, Result};
 use crate::material::{Lame, Mat32, Material, anisotropic_energy, membrane_energy};
@@ -432,7 +432,7 @@ impl State {
         let alpha = Vec4::splat(c.alpha_membrane);
         for colour in m.colours.windows(2) {
             let (start, end) = (colour[0], colour[1]);
-            for_range(parallel, 0, (end - start).div_ceil(4), |g| {
+            for_range_min(parallel, 0, (end - start).div_ceil(4), MIN_PARALLEL / 4, |g| {
                 let base = start + 4 * g;
                 let real = (end - base).min(4);
                 let last = real - 1;
@@ -568,7 +568,7 @@ impl State {
         let xpbd = c.solver == SolverKind::Xpbd;
         for colour in s.colours.windows(2) {
             let (start, end) = (colour[0], colour[1]);
-            for_range(parallel, 0, (end - start).div_ceil(4), |g| {
+            for_range_min(parallel, 0, (end - start).div_ceil(4), MIN_PARALLEL / 4, |g| {
                 let base = start + 4 * g;
                 let real = (end - base).min(4);
                 let last = real - 1;
