@@ -1,6 +1,10 @@
 //! The small matrices of membrane mechanics: 3x2 (a deformation gradient, a stress) and
 //! symmetric 2x2 (a right Cauchy-Green tensor, a second Piola-Kirchhoff stress).
 
+// `add`/`sub`/`scale` are plain methods rather than operator traits: the hot loops read as the
+// formulas in SPEC.md and nothing implicit happens.
+#![allow(clippy::should_implement_trait)]
+
 use glam::{Mat2, Vec3};
 
 /// A 3x2 matrix stored as its two columns (`F = [f0 f1]`).

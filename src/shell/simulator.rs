@@ -4,6 +4,9 @@
 //! array per constraint kind); rest data lives in [`super::constraints`]. Nothing is allocated
 //! in a step: every scratch array is sized when the shell (or a region) is made.
 
+// NaN must fail every guard below, so comparisons are written `!(x > limit)` on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
 use std::time::Instant;
 
 use glam::{Vec3, Vec4};
@@ -264,7 +267,9 @@ impl Shell {
     /// returns `Unstable`.
     pub fn step(&mut self, measure: bool) -> Result<ShellStats> {
         if self.state.stats.finished {
-            return Ok(ShellStats { step_seconds: 0.0, ..self.state.stats });
+            let mut stats = self.state.stats;
+            stats.step_seconds = 0.0;
+            return Ok(stats);
         }
         let start = Instant::now();
         let settings = self.settings;

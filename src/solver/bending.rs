@@ -8,6 +8,9 @@
 //! the gradient is taken (it changes only with the stencil's rigid motion, as in shape matching),
 //! so the energy is zero at the rest shape and after any rigid motion of the stencil.
 
+// NaN must fail every guard below, so comparisons are written `!(x > limit)` on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use glam::{Vec3, Vec4};
 
 use super::wide::W3;

@@ -2,6 +2,9 @@
 //! `Δx0 = +w0/(w0+w1) C u`, `Δx1 = -w1/(w0+w1) C u`. The paper's baseline (Table 1, Fig. 14)
 //! that energy constraints are compared against.
 
+// NaN must fail every guard below, so comparisons are written `!(x > limit)` on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use glam::Vec3;
 
 /// Corrections of the two ends, or `None` when the edge has collapsed or both ends are pinned.

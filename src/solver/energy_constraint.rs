@@ -5,6 +5,9 @@
 //! inverse masses, and return per-vertex corrections; they are shared by the membrane,
 //! bending and anisotropic constraints.
 
+// NaN must fail every guard below, so comparisons are written `!(x > limit)` on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use glam::Vec3;
 
 /// Below this squared gradient sum (per unit energy) an element gives no correction: its gradient
