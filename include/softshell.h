@@ -290,6 +290,9 @@ typedef struct SoftshellShellStats {
   uint64_t contacts;
   // Wall time of the step, s.
   double step_seconds;
+  // True when the volume ratio has changed by less than 1e-5 per step for the last 60 steps
+  // without reaching `stop_volume_ratio`: the contraction has stalled (SPEC 1.7).
+  bool stalled;
 } SoftshellShellStats;
 
 #ifdef __cplusplus

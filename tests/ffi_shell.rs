@@ -200,6 +200,7 @@ fn defaults_contract_a_unit_mesh_below_0_8_within_200_steps() {
         assert!(s.elastic_energy >= 0.0 && s.bending_energy >= 0.0 && s.anisotropic_energy == 0.0);
         assert_eq!((s.collision_candidates, s.ccd_tests, s.contacts), (0, 0, 0));
         assert!(s.step_seconds > 0.0);
+        assert!(!s.stalled);
         if s.volume_ratio < 0.8 {
             reached = Some(n);
             break;
@@ -220,6 +221,8 @@ fn zero_pressure_keeps_the_rest_shape() {
     }
     let drift = positions(&shell).iter().zip(&rest).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
     assert!(drift < 1e-3, "drift {drift} of the unit diagonal");
+    let s = step(&shell).unwrap();
+    assert!(s.stalled && !s.finished, "a shell without pressure does not contract: stalled");
 }
 
 #[test]

@@ -172,6 +172,9 @@ pub struct SoftshellShellStats {
     pub contacts: u64,
     /// Wall time of the step, s.
     pub step_seconds: f64,
+    /// True when the volume ratio has changed by less than 1e-5 per step for the last 60 steps
+    /// without reaching `stop_volume_ratio`: the contraction has stalled (SPEC 1.7).
+    pub stalled: bool,
 }
 
 /// A thin shell squeezed by outside air pressure (SPEC section 1). Made by `softshell_shell_new`
@@ -403,6 +406,7 @@ mod convert {
             ccd_tests: s.ccd_tests,
             contacts: s.contacts,
             step_seconds: s.step_seconds,
+            stalled: s.stalled,
         }
     }
 }

@@ -52,7 +52,14 @@ pub struct ShellStats {
     pub contacts: u64,
     /// Wall time of the step, s.
     pub step_seconds: f64,
+    /// True when the volume ratio changed by less than 1e-5 per step for the last 60 steps without reaching the stop ratio (SPEC 1.7).
+    pub stalled: bool,
 }
+
+/// Per-step change of the volume ratio below which a step counts as quiet.
+pub(crate) const STALL_TOLERANCE: f64 = 1e-5;
+/// Quiet steps in a row after which the contraction is reported stalled.
+pub(crate) const STALL_STEPS: u32 = 60;
 
 /// Above this many bounding-box diagonals moved in one substep a vertex is taken as diverged:
 /// no contraction moves a surface that far, only a blow-up does.
@@ -106,6 +113,8 @@ struct State {
     partials: Vec<[f64; 3]>,
     rest_volume: f64,
     diagonal: f32,
+    /// Consecutive steps whose volume ratio changed by less than STALL_TOLERANCE.
+    quiet_steps: u32,
     stats: ShellStats,
 }
 
@@ -164,6 +173,7 @@ impl Shell {
             partials: vec![[0.0; 3]; largest.div_ceil(REDUCE_CHUNK)],
             rest_volume,
             diagonal,
+            quiet_steps: 0,
             stats,
             rest,
             triangles,
@@ -274,15 +284,19 @@ impl Shell {
         let start = Instant::now();
         let settings = self.settings;
         let parallel = self.pool.threads() > 1;
+        let previous_ratio = self.state.stats.volume_ratio;
         let state = &mut self.state;
         let outcome = self.pool.install(|| state.advance(&settings, parallel, measure));
         let s = &mut self.state;
         match outcome {
             Ok(()) => {
+                let change = (s.stats.volume_ratio - previous_ratio).abs();
+                s.quiet_steps = if change < STALL_TOLERANCE { s.quiet_steps.saturating_add(1) } else { 0 };
                 s.stats.step += 1;
                 s.stats.time += settings.time_step as f64;
                 s.stats.finished =
                     settings.stop_volume_ratio > 0.0 && s.stats.volume_ratio < settings.stop_volume_ratio as f64;
+                s.stats.stalled = !s.stats.finished && s.quiet_steps >= STALL_STEPS;
                 s.stats.step_seconds = start.elapsed().as_secs_f64();
                 Ok(s.stats)
             }
