@@ -171,6 +171,10 @@ int main(int argc, char **argv) {
       }
     }
     if (stats.finished) break;
+    if (stats.stalled) {
+      printf("stalled: the volume ratio no longer changes\n");
+      break;
+    }
   }
   printf("%s after %llu steps (%.3f s simulated): V/V0 = %.4f, %.3f ms per step on average, %.1f MB held\n",
          stats.finished ? "finished" : "stopped", (unsigned long long)stats.step, stats.time, stats.volume_ratio,

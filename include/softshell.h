@@ -181,8 +181,8 @@ typedef struct SoftshellMeshReport {
 // Settings of a shell, filled by `softshell_shell_def_default()` and then edited field by field.
 // The defaults contract a closed mesh scaled to a unit bounding-box diagonal visibly: the
 // pressure exceeds what the membrane can carry, so the shell buckles and shrinks until
-// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 100 steps, the
-// finer kitten within about 25); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
+// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 80 steps, the
+// finer kitten within about 20, both monotonically); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
 // (1 kg/m^2, membrane stiffness E t = 1 N/m); only the ratios pressure : E t : density t matter,
 // so a mesh of another size wants them scaled (pressure and E t with the size to keep the same
 // strains).
@@ -196,7 +196,7 @@ typedef struct SoftshellShellDef {
   // `SOFTSHELL_SOLVER_XPBD` (default), `SOFTSHELL_SOLVER_PBD` (the paper's form) or
   // `SOFTSHELL_SOLVER_PBD_DISTANCE` (edge-distance baseline).
   uint32_t solver;
-  // Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.5.
+  // Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.7.
   float pressure;
   // `SOFTSHELL_MATERIAL_STVK` (default), `_COROTATED`, `_LINEAR`, `_NEO_HOOKEAN` or
   // `_MOONEY_RIVLIN`.
@@ -218,8 +218,9 @@ typedef struct SoftshellShellDef {
   // as in the paper.
   float bending_coefficient;
   // Velocity damping per second, in [0, 1e6]: velocities are scaled by max(0, 1 - damping h)
-  // each substep. Default 3 (light: it calms the buckling without slowing the
-  // contraction much).
+  // each substep. Default 8: the contraction is a slow, nearly quasi-static
+  // process, and this removes the elastic rebound from the sudden pressure load (the default
+  // sphere's volume then falls monotonically).
   float damping;
   // The shell is finished (later steps do nothing) when V/V0 falls below this, in [0, 1);
   // 0 = never. Default 0.3.

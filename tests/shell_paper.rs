@@ -142,6 +142,8 @@ fn stiff_bending_resists_contraction_and_weak_bending_falls_monotonically() {
     // The PBD form ignores Young's modulus and is as stiff as its iterations make it: it needs
     // more pressure to contract the same shell.
     paper.pressure = 1.0;
+    // ... and the paper damps little (SPEC 1.1: "optionally damped").
+    paper.damping = 1.0;
     paper.bending = SOFTSHELL_BENDING_ISOMETRIC;
     let weak_pbd = run(&new_shell(&mesh, &paper), 150);
     paper.bending_coefficient = 1.0;
@@ -288,14 +290,19 @@ fn volume_ratio_after_100_steps_hardly_depends_on_initial_scale() {
     // V0, V0/4, V0/16: linear scales 1, 4^(-1/3), 16^(-1/3).
     //
     // With fixed absolute settings (Pa, m, kg/m^3) a smaller shell is relatively stiffer against
-    // the same pressure, so the ratio cannot be the same: printed for the record. With the scene
-    // scaled as a similar shell (thickness and density fixed, pressure x s^2, Young's modulus
-    // x s^2... equivalently every force per mass kept in proportion) the motion is the same up to
-    // the scale, which checks that no absolute length or tolerance hides in the solver.
+    // the same pressure but its motion is faster, so the ratio need not be the same: asserted
+    // loosely below. A similar shell (positions x s, masses x s^2) moves the same way in the same
+    // time steps when every acceleration scales like s: the membrane's (E t s / (rho t s^2)) needs
+    // E x s^2 and the pressure's (P s^2 / (rho t s^2)) needs P x s. That checks that no absolute
+    // length or tolerance hides in the solver.
     let scales = [1.0f32, 0.25f32.cbrt(), 0.0625f32.cbrt()];
     let absolute: Vec<f64> =
         scales.iter().map(|&s| run(&new_shell(&unit_mesh("sphere.obj", s), &def()), 100)[99]).collect();
     println!("r(100) at V0, V0/4, V0/16 with the default def unchanged: {absolute:?}");
+    // With the defaults the two effects nearly cancel between V0 and V0/16 (smaller shells are
+    // relatively stiffer, but buckle sooner): measured 0.73, 0.70, 0.76.
+    let spread = absolute.iter().cloned().fold(f64::MIN, f64::max) - absolute.iter().cloned().fold(f64::MAX, f64::min);
+    assert!(spread < 0.1, "default def: spread {spread}");
     let similar: Vec<f64> = scales
         .iter()
         .map(|&s| {
@@ -308,6 +315,7 @@ fn volume_ratio_after_100_steps_hardly_depends_on_initial_scale() {
         })
         .collect();
     println!("r(100) at V0, V0/4, V0/16 for similar shells: {similar:?}");
-    let spread = similar.iter().cloned().fold(f64::MIN, f64::max) - similar.iter().cloned().fold(f64::MAX, f64::min);
-    assert!(spread < 0.02, "spread {spread}");
+    let spread_similar =
+        similar.iter().cloned().fold(f64::MIN, f64::max) - similar.iter().cloned().fold(f64::MAX, f64::min);
+    assert!(spread_similar < 0.02, "similar shells: spread {spread_similar}");
 }

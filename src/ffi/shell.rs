@@ -57,8 +57,8 @@ pub(crate) const ANISOTROPY_DEF_COOKIE: u32 = 0x414e_4931;
 /// Settings of a shell, filled by `softshell_shell_def_default()` and then edited field by field.
 /// The defaults contract a closed mesh scaled to a unit bounding-box diagonal visibly: the
 /// pressure exceeds what the membrane can carry, so the shell buckles and shrinks until
-/// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 100 steps, the
-/// finer kitten within about 25); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
+/// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 80 steps, the
+/// finer kitten within about 20, both monotonically); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
 /// (1 kg/m^2, membrane stiffness E t = 1 N/m); only the ratios pressure : E t : density t matter,
 /// so a mesh of another size wants them scaled (pressure and E t with the size to keep the same
 /// strains).
@@ -74,7 +74,7 @@ pub struct SoftshellShellDef {
     /// `SOFTSHELL_SOLVER_XPBD` (default), `SOFTSHELL_SOLVER_PBD` (the paper's form) or
     /// `SOFTSHELL_SOLVER_PBD_DISTANCE` (edge-distance baseline).
     pub solver: u32,
-    /// Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.5.
+    /// Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.7.
     pub pressure: f32,
     /// `SOFTSHELL_MATERIAL_STVK` (default), `_COROTATED`, `_LINEAR`, `_NEO_HOOKEAN` or
     /// `_MOONEY_RIVLIN`.
@@ -96,8 +96,9 @@ pub struct SoftshellShellDef {
     /// as in the paper.
     pub bending_coefficient: f32,
     /// Velocity damping per second, in [0, 1e6]: velocities are scaled by max(0, 1 - damping h)
-    /// each substep. Default 3 (light: it calms the buckling without slowing the
-    /// contraction much).
+    /// each substep. Default 8: the contraction is a slow, nearly quasi-static
+    /// process, and this removes the elastic rebound from the sudden pressure load (the default
+    /// sphere's volume then falls monotonically).
     pub damping: f32,
     /// The shell is finished (later steps do nothing) when V/V0 falls below this, in [0, 1);
     /// 0 = never. Default 0.3.
@@ -208,7 +209,7 @@ pub extern "C" fn softshell_shell_def_default() -> SoftshellShellDef {
         substeps: 1,
         iterations: 5,
         solver: SOFTSHELL_SOLVER_XPBD,
-        pressure: 0.5,
+        pressure: 0.7,
         material: SOFTSHELL_MATERIAL_STVK,
         youngs_modulus: 1000.0,
         poisson_ratio: 0.3,
@@ -216,7 +217,7 @@ pub extern "C" fn softshell_shell_def_default() -> SoftshellShellDef {
         density: 1000.0,
         bending: SOFTSHELL_BENDING_ISOMETRIC_REST,
         bending_coefficient: 0.01,
-        damping: 3.0,
+        damping: 8.0,
         stop_volume_ratio: 0.3,
         collisions: true,
         collision_thickness: 1e-4,
