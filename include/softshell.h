@@ -50,6 +50,11 @@
 // by the iteration count and Young's modulus has no effect (for reproducing the paper).
 #define SOFTSHELL_SOLVER_PBD 1
 
+// `SoftshellShellDef.solver`: plain PBD edge-distance constraints instead of membrane energies
+// (the paper's baseline, for comparisons: triangles may shear and change area freely). The
+// membrane energy is still measured for the stats.
+#define SOFTSHELL_SOLVER_PBD_DISTANCE 2
+
 // `SoftshellShellDef.material`: Saint Venant-Kirchhoff (the default and the paper's).
 #define SOFTSHELL_MATERIAL_STVK 0
 
@@ -371,8 +376,8 @@ typedef struct SoftshellMeshReport {
 // Settings of a shell, filled by `softshell_shell_def_default()` and then edited field by field.
 // The defaults contract a closed mesh scaled to a unit bounding-box diagonal visibly: the
 // pressure exceeds what the membrane can carry, so the shell buckles and shrinks until
-// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 100 steps, the
-// finer kitten within about 25); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
+// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 80 steps, the
+// finer kitten within about 20, both monotonically); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
 // (1 kg/m^2, membrane stiffness E t = 1 N/m); only the ratios pressure : E t : density t matter,
 // so a mesh of another size wants them scaled (pressure and E t with the size to keep the same
 // strains).
@@ -383,9 +388,10 @@ typedef struct SoftshellShellDef {
   uint32_t substeps;
   // Gauss-Seidel iterations per substep, 1..=1000. Default 5 (the paper's).
   uint32_t iterations;
-  // `SOFTSHELL_SOLVER_XPBD` (default) or `SOFTSHELL_SOLVER_PBD` (the paper's form).
+  // `SOFTSHELL_SOLVER_XPBD` (default), `SOFTSHELL_SOLVER_PBD` (the paper's form) or
+  // `SOFTSHELL_SOLVER_PBD_DISTANCE` (edge-distance baseline).
   uint32_t solver;
-  // Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.5.
+  // Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.7.
   float pressure;
   // `SOFTSHELL_MATERIAL_STVK` (default), `_COROTATED`, `_LINEAR`, `_NEO_HOOKEAN` or
   // `_MOONEY_RIVLIN`.
@@ -407,8 +413,9 @@ typedef struct SoftshellShellDef {
   // as in the paper.
   float bending_coefficient;
   // Velocity damping per second, in [0, 1e6]: velocities are scaled by max(0, 1 - damping h)
-  // each substep. Default 3 (light: it calms the buckling without slowing the
-  // contraction much).
+  // each substep. Default 8: the contraction is a slow, nearly quasi-static
+  // process, and this removes the elastic rebound from the sudden pressure load (the default
+  // sphere's volume then falls monotonically).
   float damping;
   // The shell is finished (later steps do nothing) when V/V0 falls below this, in [0, 1);
   // 0 = never. Default 0.3.
@@ -429,13 +436,14 @@ typedef struct SoftshellShellDef {
 typedef struct SoftshellAnisotropyDef {
   // `SOFTSHELL_ANISOTROPY_ARAP` (default), `_STVK` or `_SQRT`.
   uint32_t energy;
-  // Fibre stiffness mu, Pa, in [0, 1e12]. Default 10000 (10 times the default Young's
-  // modulus).
+  // Fibre stiffness mu, Pa, in [0, 1e12]. Default 1000 (the default Young's modulus).
   float stiffness;
   // Inward push k_A (paper section 3.3), dimensionless, in [0, 1e6]: each vertex gradient of
   // the fibre constraint gets `+ k_A sqrt(A0) n` (n the face's outward unit normal, A0 its rest
   // area, so the push does not depend on the mesh scale), which turns corrections into an
-  // inward motion of the region. Default 0.5.
+  // inward motion of the region. The push acts as long as the fibre is
+  // strained, so large values make the region cave through the opposite side (without the
+  // collision stage). Default 0.003.
   float inward_push;
   // Target stretch L along the fibre, in (0, 1]: 1 = the paper's energies, below 1 = active
   // contraction (the fibre wants to shorten to L). Default 1.
@@ -478,6 +486,9 @@ typedef struct SoftshellShellStats {
   uint64_t contacts;
   // Wall time of the step, s.
   double step_seconds;
+  // True when the volume ratio has changed by less than 1e-5 per step for the last 60 steps
+  // without reaching `stop_volume_ratio`: the contraction has stalled (SPEC 1.7).
+  bool stalled;
 } SoftshellShellStats;
 
 #ifdef __cplusplus

@@ -188,18 +188,26 @@ fn nulls_and_meshes_that_bound_no_solid_are_refused() {
 }
 
 #[test]
-fn defaults_contract_a_unit_mesh_below_0_8_within_200_steps() {
+fn defaults_contract_a_unit_mesh_below_0_8_within_200_steps_monotonically() {
     let mesh = unit_mesh("sphere.obj", 1.0);
     let shell = new_shell(&mesh, &softshell_shell_def_default()).unwrap();
     let mut reached = None;
+    let mut previous = 1.0;
     for n in 1..=200u64 {
         let s = step(&shell).unwrap();
+        assert!(
+            s.volume_ratio <= previous + 1e-4,
+            "step {n}: the volume ratio rose from {previous} to {}",
+            s.volume_ratio
+        );
+        previous = s.volume_ratio;
         assert_eq!(s.step, n);
         assert!((s.time - n as f64 / 60.0).abs() < 1e-5);
         assert!(s.volume_ratio.is_finite() && s.residual.is_finite());
         assert!(s.elastic_energy >= 0.0 && s.bending_energy >= 0.0 && s.anisotropic_energy == 0.0);
         assert_eq!((s.collision_candidates, s.ccd_tests, s.contacts), (0, 0, 0));
         assert!(s.step_seconds > 0.0);
+        assert!(!s.stalled);
         if s.volume_ratio < 0.8 {
             reached = Some(n);
             break;
@@ -220,6 +228,8 @@ fn zero_pressure_keeps_the_rest_shape() {
     }
     let drift = positions(&shell).iter().zip(&rest).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
     assert!(drift < 1e-3, "drift {drift} of the unit diagonal");
+    let s = step(&shell).unwrap();
+    assert!(s.stalled && !s.finished, "a shell without pressure does not contract: stalled");
 }
 
 #[test]

@@ -17,6 +17,10 @@ pub const SOFTSHELL_SOLVER_XPBD: u32 = 0;
 /// `SoftshellShellDef.solver`: the paper's plain PBD energy constraints `C = W`: stiffness is set
 /// by the iteration count and Young's modulus has no effect (for reproducing the paper).
 pub const SOFTSHELL_SOLVER_PBD: u32 = 1;
+/// `SoftshellShellDef.solver`: plain PBD edge-distance constraints instead of membrane energies
+/// (the paper's baseline, for comparisons: triangles may shear and change area freely). The
+/// membrane energy is still measured for the stats.
+pub const SOFTSHELL_SOLVER_PBD_DISTANCE: u32 = 2;
 
 /// `SoftshellShellDef.material`: Saint Venant-Kirchhoff (the default and the paper's).
 pub const SOFTSHELL_MATERIAL_STVK: u32 = 0;
@@ -53,8 +57,8 @@ pub(crate) const ANISOTROPY_DEF_COOKIE: u32 = 0x414e_4931;
 /// Settings of a shell, filled by `softshell_shell_def_default()` and then edited field by field.
 /// The defaults contract a closed mesh scaled to a unit bounding-box diagonal visibly: the
 /// pressure exceeds what the membrane can carry, so the shell buckles and shrinks until
-/// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 100 steps, the
-/// finer kitten within about 25); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
+/// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 80 steps, the
+/// finer kitten within about 20, both monotonically); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
 /// (1 kg/m^2, membrane stiffness E t = 1 N/m); only the ratios pressure : E t : density t matter,
 /// so a mesh of another size wants them scaled (pressure and E t with the size to keep the same
 /// strains).
@@ -67,9 +71,10 @@ pub struct SoftshellShellDef {
     pub substeps: u32,
     /// Gauss-Seidel iterations per substep, 1..=1000. Default 5 (the paper's).
     pub iterations: u32,
-    /// `SOFTSHELL_SOLVER_XPBD` (default) or `SOFTSHELL_SOLVER_PBD` (the paper's form).
+    /// `SOFTSHELL_SOLVER_XPBD` (default), `SOFTSHELL_SOLVER_PBD` (the paper's form) or
+    /// `SOFTSHELL_SOLVER_PBD_DISTANCE` (edge-distance baseline).
     pub solver: u32,
-    /// Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.5.
+    /// Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.7.
     pub pressure: f32,
     /// `SOFTSHELL_MATERIAL_STVK` (default), `_COROTATED`, `_LINEAR`, `_NEO_HOOKEAN` or
     /// `_MOONEY_RIVLIN`.
@@ -91,8 +96,9 @@ pub struct SoftshellShellDef {
     /// as in the paper.
     pub bending_coefficient: f32,
     /// Velocity damping per second, in [0, 1e6]: velocities are scaled by max(0, 1 - damping h)
-    /// each substep. Default 3 (light: it calms the buckling without slowing the
-    /// contraction much).
+    /// each substep. Default 8: the contraction is a slow, nearly quasi-static
+    /// process, and this removes the elastic rebound from the sudden pressure load (the default
+    /// sphere's volume then falls monotonically).
     pub damping: f32,
     /// The shell is finished (later steps do nothing) when V/V0 falls below this, in [0, 1);
     /// 0 = never. Default 0.3.
@@ -115,13 +121,14 @@ pub struct SoftshellShellDef {
 pub struct SoftshellAnisotropyDef {
     /// `SOFTSHELL_ANISOTROPY_ARAP` (default), `_STVK` or `_SQRT`.
     pub energy: u32,
-    /// Fibre stiffness mu, Pa, in [0, 1e12]. Default 10000 (10 times the default Young's
-    /// modulus).
+    /// Fibre stiffness mu, Pa, in [0, 1e12]. Default 1000 (the default Young's modulus).
     pub stiffness: f32,
     /// Inward push k_A (paper section 3.3), dimensionless, in [0, 1e6]: each vertex gradient of
     /// the fibre constraint gets `+ k_A sqrt(A0) n` (n the face's outward unit normal, A0 its rest
     /// area, so the push does not depend on the mesh scale), which turns corrections into an
-    /// inward motion of the region. Default 0.5.
+    /// inward motion of the region. The push acts as long as the fibre is
+    /// strained, so large values make the region cave through the opposite side (without the
+    /// collision stage). Default 0.003.
     pub inward_push: f32,
     /// Target stretch L along the fibre, in (0, 1]: 1 = the paper's energies, below 1 = active
     /// contraction (the fibre wants to shorten to L). Default 1.
@@ -166,6 +173,9 @@ pub struct SoftshellShellStats {
     pub contacts: u64,
     /// Wall time of the step, s.
     pub step_seconds: f64,
+    /// True when the volume ratio has changed by less than 1e-5 per step for the last 60 steps
+    /// without reaching `stop_volume_ratio`: the contraction has stalled (SPEC 1.7).
+    pub stalled: bool,
 }
 
 /// A thin shell squeezed by outside air pressure (SPEC section 1). Made by `softshell_shell_new`
@@ -199,7 +209,7 @@ pub extern "C" fn softshell_shell_def_default() -> SoftshellShellDef {
         substeps: 1,
         iterations: 5,
         solver: SOFTSHELL_SOLVER_XPBD,
-        pressure: 0.5,
+        pressure: 0.7,
         material: SOFTSHELL_MATERIAL_STVK,
         youngs_modulus: 1000.0,
         poisson_ratio: 0.3,
@@ -207,7 +217,7 @@ pub extern "C" fn softshell_shell_def_default() -> SoftshellShellDef {
         density: 1000.0,
         bending: SOFTSHELL_BENDING_ISOMETRIC_REST,
         bending_coefficient: 0.01,
-        damping: 3.0,
+        damping: 8.0,
         stop_volume_ratio: 0.3,
         collisions: true,
         collision_thickness: 1e-4,
@@ -221,8 +231,8 @@ pub extern "C" fn softshell_shell_def_default() -> SoftshellShellDef {
 pub extern "C" fn softshell_anisotropy_def_default() -> SoftshellAnisotropyDef {
     SoftshellAnisotropyDef {
         energy: SOFTSHELL_ANISOTROPY_ARAP,
-        stiffness: 10000.0,
-        inward_push: 0.5,
+        stiffness: 1000.0,
+        inward_push: 0.003,
         target_stretch: 1.0,
         direction: [0.0; 3],
         internal_cookie: ANISOTROPY_DEF_COOKIE,
@@ -256,6 +266,7 @@ mod convert {
             match v {
                 SOFTSHELL_SOLVER_XPBD => Ok(SolverKind::Xpbd),
                 SOFTSHELL_SOLVER_PBD => Ok(SolverKind::Pbd),
+                SOFTSHELL_SOLVER_PBD_DISTANCE => Ok(SolverKind::PbdDistance),
                 _ => Err(()),
             }
         }
@@ -305,7 +316,11 @@ mod convert {
         check_positive("time_step", def.time_step, 1.0)?;
         check_count("substeps", def.substeps, 1, 1000)?;
         check_count("iterations", def.iterations, 1, 1000)?;
-        let solver = arg_kind(def.solver, "solver", "SOFTSHELL_SOLVER_XPBD (0), SOFTSHELL_SOLVER_PBD (1)")?;
+        let solver = arg_kind(
+            def.solver,
+            "solver",
+            "SOFTSHELL_SOLVER_XPBD (0), SOFTSHELL_SOLVER_PBD (1), SOFTSHELL_SOLVER_PBD_DISTANCE (2)",
+        )?;
         check_range("pressure", def.pressure, -1e12, 1e12)?;
         let material = arg_kind(
             def.material,
@@ -392,6 +407,7 @@ mod convert {
             ccd_tests: s.ccd_tests,
             contacts: s.contacts,
             step_seconds: s.step_seconds,
+            stalled: s.stalled,
         }
     }
 }

@@ -21,6 +21,7 @@ const MIN_STRETCH: f32 = 1e-12;
 
 /// `(ψ, P)` of the fibre energy with stiffness `mu`, target stretch `target` (1 = the paper's
 /// energies) and unit fibre direction `a` in the rest basis.
+#[inline]
 pub fn anisotropic_energy(kind: AnisotropicEnergy, mu: f32, target: f32, f: &Mat32, a: Vec2) -> (f32, Mat32) {
     let fa = f.c0 * a.x + f.c1 * a.y;
     let i5 = fa.length_squared();

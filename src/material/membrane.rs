@@ -41,6 +41,7 @@ const MIN_DET_C: f32 = 1e-12;
 
 /// `(ψ, P)` of `material` at F. `t0` is the rest-plane basis `[t1 t2]` in world space, read only by
 /// [`Material::Linear`]. Every branch is finite for any finite F.
+#[inline(always)]
 pub fn membrane_energy(material: Material, lame: Lame, f: &Mat32, t0: &Mat32) -> (f32, Mat32) {
     match material {
         Material::StVK => stvk(lame, f),
@@ -51,6 +52,7 @@ pub fn membrane_energy(material: Material, lame: Lame, f: &Mat32, t0: &Mat32) ->
     }
 }
 
+#[inline(always)]
 fn stvk(lame: Lame, f: &Mat32) -> (f32, Mat32) {
     // SPEC 1.3: E = (C - I)/2, ψ = μ E:E + λ/2 (tr E)², P = F (2μE + λ tr(E) I)
     let c = f.gram();
@@ -61,6 +63,7 @@ fn stvk(lame: Lame, f: &Mat32) -> (f32, Mat32) {
     (psi, f.mul_sym(s))
 }
 
+#[inline]
 fn corotated(lame: Lame, f: &Mat32) -> (f32, Mat32) {
     // SPEC 1.3: ψ = μ‖F-R‖² + λ/2 (tr S - 2)², P = 2μ(F-R) + λ(tr S - 2) R
     let Some((r, s)) = thin_polar(f) else {
@@ -73,6 +76,7 @@ fn corotated(lame: Lame, f: &Mat32) -> (f32, Mat32) {
     (psi, diff.scale(2.0 * lame.mu).add(&r.scale(lame.lambda * tr)))
 }
 
+#[inline]
 fn linear(lame: Lame, f: &Mat32, t0: &Mat32) -> (f32, Mat32) {
     // SPEC 1.3: ε = sym(T0^T F) - I, ψ = μ ε:ε + λ/2 (tr ε)², P = T0 (2με + λ tr(ε) I)
     let g = t0.transpose_mul(f);
@@ -83,6 +87,7 @@ fn linear(lame: Lame, f: &Mat32, t0: &Mat32) -> (f32, Mat32) {
     (psi, t0.mul_sym(s))
 }
 
+#[inline]
 fn neo_hookean(lame: Lame, f: &Mat32) -> (f32, Mat32) {
     // SPEC 1.3: ψ = μ/2 (tr C - 2) - μ ln J + λ/2 (ln J)², P = F [μ(I - C^-1) + λ ln J C^-1]
     let c = f.gram();
@@ -94,6 +99,7 @@ fn neo_hookean(lame: Lame, f: &Mat32) -> (f32, Mat32) {
     (psi.max(0.0), f.mul_sym(s))
 }
 
+#[inline]
 fn mooney_rivlin(lame: Lame, f: &Mat32) -> (f32, Mat32) {
     // SPEC 1.3: I1 = tr C + 1/det C, I2 = det C + tr C/det C, ψ = C10(I1-3) + C01(I2-3),
     // S = 2[C10(I - C^-1/det C) + C01(det C C^-1 + I/det C - (tr C/det C) C^-1)], P = F S

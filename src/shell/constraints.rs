@@ -24,6 +24,8 @@ pub(crate) struct Membranes {
     pub basis: Vec<Mat32>,
     /// The mesh triangle of each constraint.
     pub face: Vec<u32>,
+    /// Inverse masses of the three corners (fixed), so projections gather no masses.
+    pub inv_mass: Vec<[f32; 3]>,
     /// Colour c is `colours[c]..colours[c + 1]`.
     pub colours: Vec<usize>,
 }
@@ -63,12 +65,18 @@ impl Membranes {
         self.tri.len()
     }
 
+    /// Copies the corners' inverse masses next to each constraint.
+    pub(crate) fn set_inverse_masses(&mut self, inv_mass: &[f32]) {
+        self.inv_mass = self.tri.iter().map(|t| t.map(|v| inv_mass[v as usize])).collect();
+    }
+
     pub(crate) fn memory_bytes(&self) -> usize {
         vec_bytes(&self.tri)
             + vec_bytes(&self.dm_inv)
             + vec_bytes(&self.area)
             + vec_bytes(&self.basis)
             + vec_bytes(&self.face)
+            + vec_bytes(&self.inv_mass)
             + vec_bytes(&self.colours)
     }
 }
@@ -79,6 +87,9 @@ pub(crate) struct Bendings {
     /// `(x0, x1, x2, x3)`: the edge, then the opposite vertices.
     pub idx: Vec<[u32; 4]>,
     pub k: Vec<[f32; 4]>,
+    /// `w_i K_i` and `Σ w_i K_i²` (inverse masses are fixed), so projections gather no masses.
+    pub wk: Vec<[f32; 4]>,
+    pub wk2: Vec<f32>,
     pub q: Vec<f32>,
     /// Rest `Σ K_i X_i` in the stencil frame: only for the rest-preserving model.
     pub rest_local: Vec<Vec3>,
@@ -124,6 +135,17 @@ impl Bendings {
 
     pub(crate) fn len(&self) -> usize {
         self.idx.len()
+    }
+
+    /// Precomputes the mass-weighted coefficients from the inverse masses.
+    pub(crate) fn set_inverse_masses(&mut self, inv_mass: &[f32]) {
+        self.wk = self
+            .idx
+            .iter()
+            .zip(&self.k)
+            .map(|(idx, k)| [0, 1, 2, 3].map(|j| inv_mass[idx[j] as usize] * k[j]))
+            .collect();
+        self.wk2 = self.wk.iter().zip(&self.k).map(|(wk, k)| (0..4).map(|j| wk[j] * k[j]).sum()).collect();
     }
 
     pub(crate) fn memory_bytes(&self) -> usize {
@@ -218,5 +240,31 @@ impl Anisotropics {
             + vec_bytes(&self.region)
             + vec_bytes(&self.params)
             + vec_bytes(&self.colours)
+    }
+}
+
+/// Edge-distance constraints (the paper's baseline), one per edge, sorted by colour. Built only
+/// for the distance solver.
+#[derive(Debug, Default)]
+pub(crate) struct Edges {
+    pub idx: Vec<[u32; 2]>,
+    pub rest: Vec<f32>,
+    pub colours: Vec<usize>,
+}
+
+impl Edges {
+    pub(crate) fn build(rest: &[Vec3], topology: &Topology) -> Self {
+        let (order, colours) = colour_constraints(&topology.edges, rest.len());
+        let idx: Vec<[u32; 2]> = order.iter().map(|&e| topology.edges[e as usize]).collect();
+        let lengths = idx.iter().map(|&[a, b]| (rest[b as usize] - rest[a as usize]).length()).collect();
+        Edges { idx, rest: lengths, colours }
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.idx.len()
+    }
+
+    pub(crate) fn memory_bytes(&self) -> usize {
+        vec_bytes(&self.idx) + vec_bytes(&self.rest) + vec_bytes(&self.colours)
     }
 }

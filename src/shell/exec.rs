@@ -3,7 +3,6 @@
 //! on the thread count.
 
 /// Below this many items a loop runs serially: a rayon split costs more than the work.
-#[cfg_attr(not(feature = "parallel"), allow(dead_code))]
 pub(crate) const MIN_PARALLEL: usize = 256;
 /// Items per chunk of a reduction (fixed: the summation order must not depend on threads).
 pub(crate) const REDUCE_CHUNK: usize = 2048;
@@ -54,13 +53,20 @@ impl<T: Copy> Shared<T> {
 /// The calls must be independent (they may run in any order).
 #[inline]
 pub(crate) fn for_range(parallel: bool, start: usize, end: usize, f: impl Fn(usize) + Sync + Send) {
+    for_range_min(parallel, start, end, MIN_PARALLEL, f)
+}
+
+/// [`for_range`] where each task gets at least `min_len` indices (fewer for indices that each
+/// stand for several items, such as a group of four constraints).
+#[inline]
+pub(crate) fn for_range_min(parallel: bool, start: usize, end: usize, min_len: usize, f: impl Fn(usize) + Sync + Send) {
     #[cfg(feature = "parallel")]
-    if parallel && end - start >= 2 * MIN_PARALLEL {
+    if parallel && end - start >= 2 * min_len {
         use rayon::prelude::*;
-        (start..end).into_par_iter().with_min_len(MIN_PARALLEL).for_each(f);
+        (start..end).into_par_iter().with_min_len(min_len).for_each(f);
         return;
     }
-    let _ = parallel;
+    let _ = (parallel, min_len);
     for i in start..end {
         f(i);
     }

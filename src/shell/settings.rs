@@ -11,6 +11,8 @@ pub enum SolverKind {
     Xpbd,
     /// The paper's plain PBD form `C = W` (stiffness set by the iteration count).
     Pbd,
+    /// Plain PBD edge-distance constraints instead of membrane energies (the paper's baseline).
+    PbdDistance,
 }
 
 /// Which bending model (SPEC 1.4).

@@ -4,19 +4,23 @@
 //! array per constraint kind); rest data lives in [`super::constraints`]. Nothing is allocated
 //! in a step: every scratch array is sized when the shell (or a region) is made.
 
+// NaN must fail every guard below, so comparisons are written `!(x > limit)` on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
 use std::time::Instant;
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
-use super::constraints::{Anisotropics, Bendings, Membranes, Region};
-use super::exec::{REDUCE_CHUNK, Shared, chunk_partials, for_range};
+use super::constraints::{Anisotropics, Bendings, Edges, Membranes, Region};
+use super::exec::{MIN_PARALLEL, REDUCE_CHUNK, Shared, chunk_partials, for_range, for_range_min};
 use super::settings::{AnisotropySettings, BendingKind, ShellSettings, SolverKind};
 use crate::error::{Error, ErrorKind, Result};
 use crate::material::{Lame, Mat32, Material, anisotropic_energy, membrane_energy};
 use crate::mesh::{CurvatureKind, Topology, TriMesh, bounding_box, require_closed_oriented_solid, vertex_curvature};
 use crate::parallel::WorkerPool;
 use crate::solver::{
-    bending_energy, deformation_gradient, pbd_energy_correction, scatter_stress, xpbd_energy_correction,
+    MembraneLanes, W3, bending_energy, bending_projection_wide, deformation_gradient, distance_correction,
+    pbd_energy_correction, scatter_stress, stvk_projection_wide, xpbd_energy_correction,
 };
 
 /// What one step did (SPEC 4: error measures beside the time).
@@ -48,7 +52,14 @@ pub struct ShellStats {
     pub contacts: u64,
     /// Wall time of the step, s.
     pub step_seconds: f64,
+    /// True when the volume ratio changed by less than 1e-5 per step for the last 60 steps without reaching the stop ratio (SPEC 1.7).
+    pub stalled: bool,
 }
+
+/// Per-step change of the volume ratio below which a step counts as quiet.
+pub(crate) const STALL_TOLERANCE: f64 = 1e-5;
+/// Quiet steps in a row after which the contraction is reported stalled.
+pub(crate) const STALL_STEPS: u32 = 60;
 
 /// Above this many bounding-box diagonals moved in one substep a vertex is taken as diverged:
 /// no contraction moves a surface that far, only a blow-up does.
@@ -90,6 +101,8 @@ struct State {
     x_backup: Vec<Vec3>,
     v_backup: Vec<Vec3>,
     membranes: Membranes,
+    /// Edge-distance constraints: only for the distance solver.
+    edges: Edges,
     lambda_membrane: Vec<f32>,
     bendings: Bendings,
     lambda_bending: Vec<f32>,
@@ -100,6 +113,8 @@ struct State {
     partials: Vec<[f64; 3]>,
     rest_volume: f64,
     diagonal: f32,
+    /// Consecutive steps whose volume ratio changed by less than STALL_TOLERANCE.
+    quiet_steps: u32,
     stats: ShellStats,
 }
 
@@ -114,7 +129,9 @@ impl Shell {
         let triangles = mesh.triangles().to_vec();
         let n = rest.len();
         let membranes = Membranes::build(&rest, &triangles, settings.material == Material::Linear)?;
-        let bendings = match settings.bending {
+        let edges =
+            if settings.solver == SolverKind::PbdDistance { Edges::build(&rest, topology) } else { Edges::default() };
+        let mut bendings = match settings.bending {
             BendingKind::None => Bendings::default(),
             kind => Bendings::build(&rest, &triangles, topology, kind == BendingKind::IsometricRest),
         };
@@ -128,8 +145,11 @@ impl Shell {
             }
         }
         let inv_mass: Vec<f32> = mass.iter().map(|&m| if m > 0.0 { (1.0 / m) as f32 } else { 0.0 }).collect();
+        bendings.set_inverse_masses(&inv_mass);
+        let mut membranes = membranes;
+        membranes.set_inverse_masses(&inv_mass);
         let xpbd = settings.solver == SolverKind::Xpbd;
-        let largest = n.max(triangles.len()).max(bendings.len());
+        let largest = n.max(triangles.len()).max(bendings.len()).max(edges.len());
         let rest_volume = crate::mesh::signed_volume(&rest, &triangles);
         let diagonal = bounding_box(&rest).diagonal();
         let stats = ShellStats { volume: rest_volume, volume_ratio: 1.0, ..Default::default() };
@@ -145,6 +165,7 @@ impl Shell {
             lambda_membrane: if xpbd { vec![0.0; membranes.len()] } else { Vec::new() },
             lambda_bending: if xpbd { vec![0.0; bendings.len()] } else { Vec::new() },
             membranes,
+            edges,
             bendings,
             regions: Vec::new(),
             anisotropics: None,
@@ -152,6 +173,7 @@ impl Shell {
             partials: vec![[0.0; 3]; largest.div_ceil(REDUCE_CHUNK)],
             rest_volume,
             diagonal,
+            quiet_steps: 0,
             stats,
             rest,
             triangles,
@@ -206,7 +228,7 @@ impl Shell {
         let s = &mut self.state;
         s.regions.push(Region { faces: faces.to_vec(), settings });
         let aniso = Anisotropics::build(&s.rest, &s.triangles, &s.regions);
-        let largest = s.x.len().max(s.triangles.len()).max(s.bendings.len()).max(aniso.len());
+        let largest = s.x.len().max(s.triangles.len()).max(s.bendings.len()).max(s.edges.len()).max(aniso.len());
         s.partials.resize(largest.div_ceil(REDUCE_CHUNK), [0.0; 3]);
         s.lambda_aniso = if self.settings.solver == SolverKind::Xpbd { vec![0.0; aniso.len()] } else { Vec::new() };
         s.anisotropics = Some(aniso);
@@ -232,6 +254,7 @@ impl Shell {
             + b(&s.x_backup)
             + b(&s.v_backup)
             + s.membranes.memory_bytes()
+            + s.edges.memory_bytes()
             + b(&s.lambda_membrane)
             + s.bendings.memory_bytes()
             + b(&s.lambda_bending)
@@ -254,20 +277,26 @@ impl Shell {
     /// returns `Unstable`.
     pub fn step(&mut self, measure: bool) -> Result<ShellStats> {
         if self.state.stats.finished {
-            return Ok(ShellStats { step_seconds: 0.0, ..self.state.stats });
+            let mut stats = self.state.stats;
+            stats.step_seconds = 0.0;
+            return Ok(stats);
         }
         let start = Instant::now();
         let settings = self.settings;
         let parallel = self.pool.threads() > 1;
+        let previous_ratio = self.state.stats.volume_ratio;
         let state = &mut self.state;
         let outcome = self.pool.install(|| state.advance(&settings, parallel, measure));
         let s = &mut self.state;
         match outcome {
             Ok(()) => {
+                let change = (s.stats.volume_ratio - previous_ratio).abs();
+                s.quiet_steps = if change < STALL_TOLERANCE { s.quiet_steps.saturating_add(1) } else { 0 };
                 s.stats.step += 1;
                 s.stats.time += settings.time_step as f64;
                 s.stats.finished =
                     settings.stop_volume_ratio > 0.0 && s.stats.volume_ratio < settings.stop_volume_ratio as f64;
+                s.stats.stalled = !s.stats.finished && s.quiet_steps >= STALL_STEPS;
                 s.stats.step_seconds = start.elapsed().as_secs_f64();
                 Ok(s.stats)
             }
@@ -361,7 +390,11 @@ impl State {
             self.lambda_bending.fill(0.0);
             self.lambda_aniso.fill(0.0);
             for _ in 0..settings.iterations {
-                self.project_membranes(&coeff, parallel);
+                if settings.solver == SolverKind::PbdDistance {
+                    self.project_edges(parallel);
+                } else {
+                    self.project_membranes(&coeff, parallel);
+                }
                 if coeff.bending_coefficient > 0.0 {
                     self.project_bendings(&coeff, parallel);
                 }
@@ -395,7 +428,8 @@ impl State {
         for_range(parallel, 0, x.len(), |i| {
             let mut f = Vec3::ZERO;
             for &face in &faces[offsets[i] as usize..offsets[i + 1] as usize] {
-                let [a, b, c] = tris[face as usize].map(|k| x[k as usize]);
+                let t = &tris[face as usize];
+                let (a, b, c) = (x[t[0] as usize], x[t[1] as usize], x[t[2] as usize]);
                 f += (b - a).cross(c - a);
             }
             // SAFETY: each iteration touches only index i.
@@ -407,32 +441,110 @@ impl State {
         });
     }
 
-    fn project_membranes(&mut self, c: &Coefficients, parallel: bool) {
+    /// StVK (the default) four triangles at a time (SSE lanes), as the bending stencils; the
+    /// other materials one at a time.
+    fn project_membranes_stvk(&mut self, c: &Coefficients, parallel: bool) {
         let m = &self.membranes;
-        let w = &self.inv_mass;
+        let p = Shared::new(&mut self.p);
+        let lambda = Shared::new(&mut self.lambda_membrane);
+        let xpbd = c.solver == SolverKind::Xpbd;
+        let alpha = Vec4::splat(c.alpha_membrane);
+        for colour in m.colours.windows(2) {
+            let (start, end) = (colour[0], colour[1]);
+            for_range_min(parallel, 0, (end - start).div_ceil(4), MIN_PARALLEL / 4, |g| {
+                let base = start + 4 * g;
+                let real = (end - base).min(4);
+                let last = real - 1;
+                let lanes: [usize; 4] = [base, base + 1.min(last), base + 2.min(last), base + 3.min(last)];
+                let id = |j: usize| {
+                    let t = &m.tri[lanes[j]];
+                    [t[0] as usize, t[1] as usize, t[2] as usize]
+                };
+                let idx = [id(0), id(1), id(2), id(3)];
+                let lane4 = |a: &[f32]| Vec4::new(a[lanes[0]], a[lanes[1]], a[lanes[2]], a[lanes[3]]);
+                let (d0, d1, d2, d3) =
+                    (&m.dm_inv[lanes[0]], &m.dm_inv[lanes[1]], &m.dm_inv[lanes[2]], &m.dm_inv[lanes[3]]);
+                let (w0, w1, w2, w3) =
+                    (&m.inv_mass[lanes[0]], &m.inv_mass[lanes[1]], &m.inv_mass[lanes[2]], &m.inv_mass[lanes[3]]);
+                let rest = MembraneLanes {
+                    dm_inv: [
+                        Vec4::new(d0[0], d1[0], d2[0], d3[0]),
+                        Vec4::new(d0[1], d1[1], d2[1], d3[1]),
+                        Vec4::new(d0[2], d1[2], d2[2], d3[2]),
+                        Vec4::new(d0[3], d1[3], d2[3], d3[3]),
+                    ],
+                    area: lane4(&m.area),
+                    inv_mass: [
+                        Vec4::new(w0[0], w1[0], w2[0], w3[0]),
+                        Vec4::new(w0[1], w1[1], w2[1], w3[1]),
+                        Vec4::new(w0[2], w1[2], w2[2], w3[2]),
+                    ],
+                };
+                // SAFETY: triangles of one colour touch disjoint vertices; lambda[i] is i's. The
+                // padding lanes read the last real triangle again and are not written.
+                unsafe {
+                    let vertex =
+                        |k: usize| W3::gather([p.get(idx[0][k]), p.get(idx[1][k]), p.get(idx[2][k]), p.get(idx[3][k])]);
+                    let x = [vertex(0), vertex(1), vertex(2)];
+                    let lam = if xpbd {
+                        Vec4::new(
+                            lambda.get(lanes[0]),
+                            lambda.get(lanes[1]),
+                            lambda.get(lanes[2]),
+                            lambda.get(lanes[3]),
+                        )
+                    } else {
+                        Vec4::ZERO
+                    };
+                    let (corr, dlambda, active) =
+                        stvk_projection_wide(&x, &rest, c.lame.mu, c.lame.lambda, xpbd.then_some((alpha, lam)));
+                    for j in 0..real {
+                        if active & (1 << j) == 0 {
+                            continue;
+                        }
+                        if xpbd {
+                            lambda.set(lanes[j], lam[j] + dlambda[j]);
+                        }
+                        for k in 0..3 {
+                            p.set(idx[j][k], x[k].lane(j) + corr[k].lane(j));
+                        }
+                    }
+                }
+            });
+        }
+    }
+
+    fn project_membranes(&mut self, c: &Coefficients, parallel: bool) {
+        if c.material == Material::StVK {
+            return self.project_membranes_stvk(c, parallel);
+        }
+        let m = &self.membranes;
         let p = Shared::new(&mut self.p);
         let lambda = Shared::new(&mut self.lambda_membrane);
         for colour in m.colours.windows(2) {
             for_range(parallel, colour[0], colour[1], |i| {
-                let [a, b, d] = m.tri[i].map(|k| k as usize);
+                let t = &m.tri[i];
+                let (a, b, d) = (t[0] as usize, t[1] as usize, t[2] as usize);
                 // SAFETY: constraints of one colour touch disjoint vertices, and constraint i
                 // alone owns lambda[i].
                 unsafe {
                     let x = [p.get(a), p.get(b), p.get(d)];
                     let (energy, grad) = gather_membrane(m, i, x, c);
-                    let inv = [w[a], w[b], w[d]];
+                    let inv = m.inv_mass[i];
                     let mut corr = [Vec3::ZERO; 3];
                     match c.solver {
                         SolverKind::Xpbd => {
                             let l = lambda.get(i);
-                            let min_c = 1e-6 * m.area[i].sqrt();
-                            let dl = xpbd_energy_correction(energy, &grad, &inv, c.alpha_membrane, l, min_c, &mut corr);
+                            // At rest when sqrt(2 ψ) < 1e-6 (a strain of about 1e-6).
+                            let min_c2 = 1e-12 * m.area[i];
+                            let dl =
+                                xpbd_energy_correction(energy, &grad, &inv, c.alpha_membrane, l, min_c2, &mut corr);
                             if dl == 0.0 {
                                 return;
                             }
                             lambda.set(i, l + dl);
                         }
-                        SolverKind::Pbd => {
+                        SolverKind::Pbd | SolverKind::PbdDistance => {
                             if !pbd_energy_correction(energy, &grad, &inv, 1.0, &mut corr) {
                                 return;
                             }
@@ -446,41 +558,100 @@ impl State {
         }
     }
 
-    fn project_bendings(&mut self, c: &Coefficients, parallel: bool) {
-        let s = &self.bendings;
+    fn project_edges(&mut self, parallel: bool) {
+        let e = &self.edges;
         let w = &self.inv_mass;
         let p = Shared::new(&mut self.p);
-        let lambda = Shared::new(&mut self.lambda_bending);
-        for colour in s.colours.windows(2) {
+        for colour in e.colours.windows(2) {
             for_range(parallel, colour[0], colour[1], |i| {
-                let idx = s.idx[i].map(|k| k as usize);
-                // SAFETY: constraints of one colour touch disjoint vertices; lambda[i] is i's.
+                let (a, b) = (e.idx[i][0] as usize, e.idx[i][1] as usize);
+                // SAFETY: edges of one colour touch disjoint vertices.
                 unsafe {
-                    let x = idx.map(|k| p.get(k));
-                    let (energy, grad) = bending_stencil(s, i, &x, c.keep_rest);
-                    let inv = idx.map(|k| w[k]);
-                    let mut corr = [Vec3::ZERO; 4];
-                    match c.solver {
-                        SolverKind::Xpbd => {
-                            // SPEC 1.4 with W = kB E t (A0+A1)/2 · E_B: bending as stiff as
-                            // stretching over one stencil when kB = 1.
-                            let alpha = 1.0 / (c.bending_scale * stencil_area(s.q[i]));
-                            let l = lambda.get(i);
-                            let dl = xpbd_energy_correction(energy, &grad, &inv, alpha, l, 1e-7, &mut corr);
-                            if dl == 0.0 {
-                                return;
-                            }
-                            lambda.set(i, l + dl);
-                        }
-                        SolverKind::Pbd => {
-                            // The paper scales the PBD correction by kB (as Bender's library does).
-                            if !pbd_energy_correction(energy, &grad, &inv, c.bending_coefficient, &mut corr) {
-                                return;
-                            }
-                        }
+                    let (xa, xb) = (p.get(a), p.get(b));
+                    if let Some((da, db)) = distance_correction(xa, xb, w[a], w[b], e.rest[i]) {
+                        p.set(a, xa + da);
+                        p.set(b, xb + db);
                     }
-                    for k in 0..4 {
-                        p.set(idx[k], x[k] + corr[k]);
+                }
+            });
+        }
+    }
+
+    /// Bending stencils four at a time (SSE lanes): a colour's stencils are independent, so
+    /// groups of four consecutive ones are solved together; the last group of a colour repeats
+    /// its last stencil in the unused lanes, which are never written back.
+    fn project_bendings(&mut self, c: &Coefficients, parallel: bool) {
+        let s = &self.bendings;
+        let p = Shared::new(&mut self.p);
+        let lambda = Shared::new(&mut self.lambda_bending);
+        let xpbd = c.solver == SolverKind::Xpbd;
+        for colour in s.colours.windows(2) {
+            let (start, end) = (colour[0], colour[1]);
+            for_range_min(parallel, 0, (end - start).div_ceil(4), MIN_PARALLEL / 4, |g| {
+                let base = start + 4 * g;
+                let real = (end - base).min(4);
+                let last = real - 1;
+                let lanes: [usize; 4] = [base, base + 1.min(last), base + 2.min(last), base + 3.min(last)];
+                let id = |j: usize| {
+                    let t = &s.idx[lanes[j]];
+                    [t[0] as usize, t[1] as usize, t[2] as usize, t[3] as usize]
+                };
+                let idx = [id(0), id(1), id(2), id(3)];
+                // SAFETY: stencils of one colour touch disjoint vertices; lambda[i] is i's. The
+                // padding lanes read the last real stencil again and are not written.
+                unsafe {
+                    let vertex =
+                        |k: usize| W3::gather([p.get(idx[0][k]), p.get(idx[1][k]), p.get(idx[2][k]), p.get(idx[3][k])]);
+                    let x = [vertex(0), vertex(1), vertex(2), vertex(3)];
+                    let (k0, k1, k2, k3) = (&s.k[lanes[0]], &s.k[lanes[1]], &s.k[lanes[2]], &s.k[lanes[3]]);
+                    let kk = [
+                        Vec4::new(k0[1], k1[1], k2[1], k3[1]),
+                        Vec4::new(k0[2], k1[2], k2[2], k3[2]),
+                        Vec4::new(k0[3], k1[3], k2[3], k3[3]),
+                    ];
+                    let lane4 = |a: &[f32]| Vec4::new(a[lanes[0]], a[lanes[1]], a[lanes[2]], a[lanes[3]]);
+                    let q = lane4(&s.q);
+                    let wk2 = lane4(&s.wk2);
+                    let rest = c.keep_rest.then(|| {
+                        let r = &s.rest_local;
+                        W3::gather([r[lanes[0]], r[lanes[1]], r[lanes[2]], r[lanes[3]]])
+                    });
+                    let lam = if xpbd {
+                        Vec4::new(
+                            lambda.get(lanes[0]),
+                            lambda.get(lanes[1]),
+                            lambda.get(lanes[2]),
+                            lambda.get(lanes[3]),
+                        )
+                    } else {
+                        Vec4::ZERO
+                    };
+                    // SPEC 1.4 with W = kB E t (A0+A1)/2 · E_B (XPBD): bending as stiff as
+                    // stretching over one stencil when kB = 1. The paper's PBD form scales the
+                    // correction by kB instead (as Bender's library does).
+                    let alpha = Vec4::ONE / (Vec4::splat(c.bending_scale) * (Vec4::splat(1.5) / q));
+                    let (v, scale, dlambda, active) = bending_projection_wide(
+                        &x,
+                        kk,
+                        rest.as_ref(),
+                        q,
+                        wk2,
+                        xpbd.then_some((alpha, lam)),
+                        c.bending_coefficient,
+                        1e-7,
+                    );
+                    for j in 0..real {
+                        if active & (1 << j) == 0 {
+                            continue;
+                        }
+                        let i = lanes[j];
+                        if xpbd {
+                            lambda.set(i, lam[j] + dlambda[j]);
+                        }
+                        let (vj, sj, wk) = (v.lane(j), scale[j], &s.wk[i]);
+                        for k in 0..4 {
+                            p.set(idx[j][k], x[k].lane(j) + vj * (wk[k] * sj));
+                        }
                     }
                 }
             });
@@ -494,7 +665,8 @@ impl State {
         let lambda = Shared::new(&mut self.lambda_aniso);
         for colour in s.colours.windows(2) {
             for_range(parallel, colour[0], colour[1], |i| {
-                let [a, b, d] = s.tri[i].map(|k| k as usize);
+                let t = &s.tri[i];
+                let (a, b, d) = (t[0] as usize, t[1] as usize, t[2] as usize);
                 // SAFETY: constraints of one colour touch disjoint vertices; lambda[i] is i's.
                 unsafe {
                     let x = [p.get(a), p.get(b), p.get(d)];
@@ -513,14 +685,14 @@ impl State {
                         SolverKind::Xpbd => {
                             let alpha = 1.0 / (params.stiffness * c.aniso_scale);
                             let l = lambda.get(i);
-                            let min_c = 1e-6 * s.area[i].sqrt();
-                            let dl = xpbd_energy_correction(energy, &grad, &inv, alpha, l, min_c, &mut corr);
+                            let min_c2 = 1e-12 * s.area[i];
+                            let dl = xpbd_energy_correction(energy, &grad, &inv, alpha, l, min_c2, &mut corr);
                             if dl == 0.0 {
                                 return;
                             }
                             lambda.set(i, l + dl);
                         }
-                        SolverKind::Pbd => {
+                        SolverKind::Pbd | SolverKind::PbdDistance => {
                             if !pbd_energy_correction(energy, &grad, &inv, 1.0, &mut corr) {
                                 return;
                             }
@@ -643,6 +815,21 @@ impl State {
         });
         let elastic = parts.iter().map(|s| s[0]).sum::<f64>();
         let mut residual = parts.iter().fold(0.0f64, |a, s| a.max(s[1]));
+        if c.solver == SolverKind::PbdDistance {
+            // The distance solver's own constraints: the largest relative edge-length error.
+            let e = &self.edges;
+            let parts = &mut self.partials[..e.len().div_ceil(REDUCE_CHUNK)];
+            chunk_partials(parallel, e.len(), parts, |s, end| {
+                let mut worst = 0.0f64;
+                for i in s..end {
+                    let [a, b] = e.idx[i];
+                    let len = (x[b as usize] - x[a as usize]).length();
+                    worst = worst.max(((len - e.rest[i]) / e.rest[i]).abs() as f64);
+                }
+                [worst, 0.0, 0.0]
+            });
+            residual = parts.iter().fold(0.0f64, |a, s| a.max(s[0]));
+        }
 
         let mut bending = 0.0;
         if settings.bending != BendingKind::None {

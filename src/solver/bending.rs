@@ -8,7 +8,12 @@
 //! the gradient is taken (it changes only with the stencil's rigid motion, as in shape matching),
 //! so the energy is zero at the rest shape and after any rigid motion of the stencil.
 
-use glam::Vec3;
+// NaN must fail every guard below, so comparisons are written `!(x > limit)` on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use glam::{Vec3, Vec4};
+
+use super::wide::W3;
 
 /// Below this `|u × v|` a cotangent is taken as 0 (SPEC 1.4 guard).
 const MIN_CROSS: f32 = 1e-20;
@@ -30,26 +35,22 @@ fn cot(u: Vec3, v: Vec3) -> f32 {
 }
 
 /// The stencil's frame: unit edge direction, unit mean normal and their cross product; `None`
-/// when the two faces fold onto each other or collapse.
-#[inline]
+/// when the two faces fold onto each other or collapse. The normal
+/// `m = e0 × (x2 - x0) + (x3 - x0) × e0` is perpendicular to the edge by construction.
+#[inline(always)]
 fn frame(x: &[Vec3; 4]) -> Option<[Vec3; 3]> {
     let e0 = x[1] - x[0];
-    let len = e0.length();
-    if !(len > 0.0) {
+    let m = e0.cross(x[2] - x[0]) + (x[3] - x[0]).cross(e0);
+    let (l2, m2) = (e0.length_squared(), m.length_squared());
+    if !(l2 > 0.0) || !(m2 > 1e-24 * l2 * l2) {
         return None;
     }
-    let e = e0 / len;
-    let n = e0.cross(x[2] - x[0]) + (x[3] - x[0]).cross(e0);
-    let n = n - e * n.dot(e);
-    let n_len = n.length();
-    if !(n_len > 1e-12 * len * len) {
-        return None;
-    }
-    let n = n / n_len;
+    let (inv_l, inv_m) = (l2.sqrt().recip(), m2.sqrt().recip());
+    let (e, n) = (e0 * inv_l, m * inv_m);
     Some([e, n, e.cross(n)])
 }
 
-#[inline]
+#[inline(always)]
 fn stencil_vector(x: &[Vec3; 4], k: &[f32; 4]) -> Vec3 {
     // SPEC 1.4 precision: Σ K_i (x_i - x_0), never the expanded quadratic form.
     (x[1] - x[0]) * k[1] + (x[2] - x[0]) * k[2] + (x[3] - x[0]) * k[3]
@@ -73,19 +74,98 @@ pub fn bending_rest(x: [Vec3; 4]) -> Option<BendingRest> {
     Some(BendingRest { k, q: 3.0 / (a0 + a1), rest_local })
 }
 
+/// `v = Σ K_i x_i - target`: the paper's target 0 when `rest_local` is `None`, else the rest
+/// vector carried by the stencil's current frame. `E = q/2 |v|²`, `∂E/∂x_i = q K_i v`.
+#[inline(always)]
+pub fn bending_residual(x: &[Vec3; 4], k: &[f32; 4], rest_local: Option<Vec3>) -> Vec3 {
+    let v = stencil_vector(x, k);
+    match rest_local.and_then(|r| frame(x).map(|f| (r, f))) {
+        Some((r, [e, n, b])) => v - (e * r.x + n * r.y + b * r.z),
+        None => v,
+    }
+}
+
 /// Energy `E` and gradients of one stencil (see the module doc). `keep_rest` selects the
 /// rest-preserving target; `false` is the paper's flat-rest model.
-#[inline]
+#[inline(always)]
 pub fn bending_energy(x: &[Vec3; 4], rest: &BendingRest, keep_rest: bool) -> (f32, [Vec3; 4]) {
-    let mut v = stencil_vector(x, &rest.k);
-    if keep_rest {
-        if let Some([e, n, b]) = frame(x) {
-            v -= e * rest.rest_local.x + n * rest.rest_local.y + b * rest.rest_local.z;
-        }
-    }
+    let v = bending_residual(x, &rest.k, keep_rest.then_some(rest.rest_local));
     let energy = 0.5 * rest.q * v.length_squared();
     let qv = v * rest.q;
     (energy, [qv * rest.k[0], qv * rest.k[1], qv * rest.k[2], qv * rest.k[3]])
+}
+
+/// The energy constraints of SPEC 1.3 specialised to a bending stencil, whose gradients are all
+/// parallel to v: with `wk2 = Σ w_i K_i²`, both forms give `Δx_i = v · (w_i K_i · scale)`.
+/// XPBD (`alpha` = α̃, `lambda` accumulated): `C² = q|v|²`, `Δλ = -C²(C + α̃λ)/(q² |v|² wk2 + α̃ C²)`,
+/// `scale = q Δλ / C`. PBD (`alpha` = `None`, `stiffness` = kB): `scale = -kB / (2 wk2)`.
+/// Returns `(scale, Δλ)`, or `None` when the stencil is at rest (C below `min_c`) or immovable.
+#[inline(always)]
+pub fn bending_projection(
+    v: Vec3,
+    q: f32,
+    wk2: f32,
+    xpbd: Option<(f32, f32)>,
+    stiffness: f32,
+    min_c: f32,
+) -> Option<(f32, f32)> {
+    let vv = v.length_squared();
+    let c2 = q * vv;
+    if !(c2 > min_c * min_c) || !(wk2 > 0.0) {
+        return None;
+    }
+    match xpbd {
+        Some((alpha, lambda)) => {
+            let c = c2.sqrt();
+            let denom = q * q * vv * wk2 + alpha * c2;
+            // Δλ / C = -C (C + α̃λ)/denom: one division, no division by C.
+            let per_c = -c * (c + alpha * lambda) / denom;
+            Some((q * per_c, per_c * c))
+        }
+        None => Some((-stiffness / (2.0 * wk2), 0.0)),
+    }
+}
+
+/// [`bending_residual`] followed by [`bending_projection`] for four stencils at once (lanes).
+/// `x[k]` holds vertex k of every stencil, `k` the coefficients K1..K3, `rest` the rest vectors
+/// (`None`: the paper's flat target). Returns `(v, scale, Δλ, active)`: lane j is to be applied
+/// as `Δx_i = v_j · (w_i K_i · scale_j)` when bit j of `active` is set.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub fn bending_projection_wide(
+    x: &[W3; 4],
+    k: [Vec4; 3],
+    rest: Option<&W3>,
+    q: Vec4,
+    wk2: Vec4,
+    xpbd: Option<(Vec4, Vec4)>,
+    stiffness: f32,
+    min_c: f32,
+) -> (W3, Vec4, Vec4, u32) {
+    let (d1, d2, d3) = (x[1].sub(x[0]), x[2].sub(x[0]), x[3].sub(x[0]));
+    let mut v = d1.scale(k[0]).add(d2.scale(k[1])).add(d3.scale(k[2]));
+    if let Some(r) = rest {
+        let m = d1.cross(d2).add(d3.cross(d1));
+        let (l2, m2) = (d1.dot(d1), m.dot(m));
+        let valid = l2.cmpgt(Vec4::ZERO) & m2.cmpgt(Vec4::splat(1e-24) * l2 * l2);
+        let (inv_l, inv_m) = (l2.sqrt().recip(), m2.sqrt().recip());
+        let (e, n) = (d1.scale(inv_l), m.scale(inv_m));
+        let b = e.cross(n);
+        let target = e.scale(r.x).add(n.scale(r.y)).add(b.scale(r.z));
+        v = W3::select(valid, v.sub(target), v);
+    }
+    let vv = v.dot(v);
+    let c2 = q * vv;
+    let active = (c2.cmpgt(Vec4::splat(min_c * min_c)) & wk2.cmpgt(Vec4::ZERO)).bitmask();
+    match xpbd {
+        Some((alpha, lambda)) => {
+            let c = c2.sqrt();
+            let denom = q * q * vv * wk2 + alpha * c2;
+            let per_c = -c * (c + alpha * lambda) / denom;
+            (v, q * per_c, per_c * c, active)
+        }
+        None => (v, Vec4::splat(-stiffness) / (Vec4::splat(2.0) * wk2), Vec4::ZERO, active),
+    }
 }
 
 #[cfg(test)]
@@ -142,6 +222,56 @@ mod tests {
                     "v{v} axis {axis}: {fd} vs {}",
                     g[v][axis]
                 );
+            }
+        }
+        // The specialised projection equals the generic energy constraints.
+        let inv = [1.0f32, 0.5, 2.0, 0.7];
+        let wk2: f32 = (0..4).map(|i| inv[i] * r.k[i] * r.k[i]).sum();
+        for keep in [false, true] {
+            let (energy, g) = bending_energy(&x, &r, keep);
+            let v = bending_residual(&x, &r.k, keep.then_some(r.rest_local));
+            let mut generic = [Vec3::ZERO; 4];
+            let dl = crate::solver::xpbd_energy_correction(energy, &g, &inv, 0.3, 0.1, 1e-18, &mut generic);
+            let (scale, dl2) = bending_projection(v, r.q, wk2, Some((0.3, 0.1)), 1.0, 1e-9).unwrap();
+            assert!((dl - dl2).abs() < 1e-4 * dl.abs().max(1e-6));
+            for i in 0..4 {
+                assert!((generic[i] - v * (inv[i] * r.k[i] * scale)).length() < 1e-4 * generic[i].length().max(1e-6));
+            }
+            let mut generic = [Vec3::ZERO; 4];
+            assert!(crate::solver::pbd_energy_correction(energy, &g, &inv, 0.3, &mut generic));
+            let (scale, _) = bending_projection(v, r.q, wk2, None, 0.3, 1e-9).unwrap();
+            for i in 0..4 {
+                assert!((generic[i] - v * (inv[i] * r.k[i] * scale)).length() < 1e-4 * generic[i].length().max(1e-6));
+            }
+        }
+        // Four lanes give what the scalar kernel gives, lane by lane.
+        let stencils = [x, x0, x.map(|p| p * 1.1), x.map(|p| p + Vec3::X)];
+        let wx: [W3; 4] = [0, 1, 2, 3].map(|v| W3::gather(stencils.map(|s| s[v])));
+        let kk = [Vec4::splat(r.k[1]), Vec4::splat(r.k[2]), Vec4::splat(r.k[3])];
+        for keep in [false, true] {
+            let rest = W3::gather([r.rest_local; 4]);
+            let xp = Some((Vec4::splat(0.3), Vec4::splat(0.1)));
+            let (v4, s4, l4, act) = bending_projection_wide(
+                &wx,
+                kk,
+                keep.then_some(&rest),
+                Vec4::splat(r.q),
+                Vec4::splat(wk2),
+                xp,
+                1.0,
+                1e-9,
+            );
+            for (j, st) in stencils.iter().enumerate() {
+                let v = bending_residual(st, &r.k, keep.then_some(r.rest_local));
+                match bending_projection(v, r.q, wk2, Some((0.3, 0.1)), 1.0, 1e-9) {
+                    Some((scale, dl)) => {
+                        assert!(act & (1 << j) != 0);
+                        assert!((v4.lane(j) - v).length() <= 1e-6 * v.length().max(1e-6), "lane {j}");
+                        assert!((s4[j] - scale).abs() <= 1e-5 * scale.abs().max(1e-9));
+                        assert!((l4[j] - dl).abs() <= 1e-5 * dl.abs().max(1e-9));
+                    }
+                    None => assert!(act & (1 << j) == 0),
+                }
             }
         }
         // Rest-preserving form: the gradient with the frame rotation held fixed.

@@ -5,6 +5,9 @@
 //! inverse masses, and return per-vertex corrections; they are shared by the membrane,
 //! bending and anisotropic constraints.
 
+// NaN must fail every guard below, so comparisons are written `!(x > limit)` on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use glam::Vec3;
 
 /// Below this squared gradient sum (per unit energy) an element gives no correction: its gradient
@@ -14,7 +17,7 @@ const MIN_DENOMINATOR: f32 = 1e-30;
 /// The paper's PBD energy constraint (SPEC 1.3): `s = C / Σ w_j |∇_j C|²`,
 /// `Δx_i = -stiffness · s · w_i ∇_i C` with `C = energy`. Independent of the energy's scale.
 /// Returns `false` (and leaves `correction` untouched) when there is nothing to do.
-#[inline]
+#[inline(always)]
 pub fn pbd_energy_correction<const N: usize>(
     energy: f32,
     grad: &[Vec3; N],
@@ -36,20 +39,20 @@ pub fn pbd_energy_correction<const N: usize>(
 /// The XPBD energy constraint of SPEC 1.3 with `W = k Ŵ`: `C = sqrt(2 Ŵ)`,
 /// `Δλ = -C² (C + α̃ λ) / (Σ_i w_i |∇_i Ŵ|² + α̃ C²)`, `Δx_i = w_i ∇_i Ŵ (Δλ / C)`.
 /// `energy` is Ŵ (unit modulus), `grad` its gradients, `alpha` = α̃ = 1/(k h²), `lambda` the
-/// accumulated multiplier of this step. Skips an element whose `C` is below `min_c` (at rest).
+/// accumulated multiplier of this step. Skips an element whose `C²` is below `min_c2` (at rest).
 /// Returns Δλ (0 when skipped, then `correction` is untouched).
-#[inline]
+#[inline(always)]
 pub fn xpbd_energy_correction<const N: usize>(
     energy: f32,
     grad: &[Vec3; N],
     inv_mass: &[f32; N],
     alpha: f32,
     lambda: f32,
-    min_c: f32,
+    min_c2: f32,
     correction: &mut [Vec3; N],
 ) -> f32 {
     let c2 = 2.0 * energy;
-    if !(c2 > min_c * min_c) {
+    if !(c2 > min_c2) {
         return 0.0;
     }
     let c = c2.sqrt();
@@ -58,8 +61,9 @@ pub fn xpbd_energy_correction<const N: usize>(
     if !(denom > MIN_DENOMINATOR) {
         return 0.0;
     }
-    let dlambda = -c2 * (c + alpha * lambda) / denom;
-    let factor = dlambda / c;
+    // Δλ / C = -C (C + α̃λ)/denom: one division, none by C.
+    let factor = -c * (c + alpha * lambda) / denom;
+    let dlambda = factor * c;
     for i in 0..N {
         correction[i] = grad[i] * (inv_mass[i] * factor);
     }
@@ -84,7 +88,7 @@ mod tests {
         let x = [Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0)];
         let (w, g) = spring(x, 1.0);
         let mut corr = [Vec3::ZERO; 2];
-        let dl = xpbd_energy_correction(w, &g, &[1.0, 1.0], 0.0, 0.0, 1e-9, &mut corr);
+        let dl = xpbd_energy_correction(w, &g, &[1.0, 1.0], 0.0, 0.0, 1e-18, &mut corr);
         assert!(dl < 0.0);
         let len = (x[1] + corr[1] - x[0] - corr[0]).length();
         assert!((len - 1.0).abs() < 1e-6, "{len}");
@@ -100,7 +104,7 @@ mod tests {
         for _ in 0..50 {
             let (w, g) = spring(x, 1.0);
             let mut corr = [Vec3::ZERO; 2];
-            lambda += xpbd_energy_correction(w, &g, &[0.0, 1.0], 1.0, lambda, 1e-9, &mut corr);
+            lambda += xpbd_energy_correction(w, &g, &[0.0, 1.0], 1.0, lambda, 1e-18, &mut corr);
             x[1] += corr[1];
         }
         assert!((x[1].x - 1.5).abs() < 1e-4, "{}", x[1].x);
@@ -116,7 +120,7 @@ mod tests {
         assert!((a[1] - b[1]).length() < 1e-6);
         let mut c = [Vec3::ZERO; 2];
         assert!(!pbd_energy_correction(1.0, &[Vec3::ZERO; 2], &[1.0, 1.0], 1.0, &mut c));
-        assert_eq!(xpbd_energy_correction(1.0, &[Vec3::ZERO; 2], &[1.0, 1.0], 0.0, 0.0, 1e-9, &mut c), 0.0);
-        assert_eq!(xpbd_energy_correction(0.0, &g, &[1.0, 1.0], 0.0, 0.0, 1e-9, &mut c), 0.0);
+        assert_eq!(xpbd_energy_correction(1.0, &[Vec3::ZERO; 2], &[1.0, 1.0], 0.0, 0.0, 1e-18, &mut c), 0.0);
+        assert_eq!(xpbd_energy_correction(0.0, &g, &[1.0, 1.0], 0.0, 0.0, 1e-18, &mut c), 0.0);
     }
 }

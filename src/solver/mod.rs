@@ -7,10 +7,18 @@
 
 mod bending;
 mod colouring;
+mod distance;
 mod energy_constraint;
+mod membrane_wide;
 mod triangle;
+mod wide;
 
-pub use bending::{BendingRest, bending_energy, bending_rest};
+pub use bending::{
+    BendingRest, bending_energy, bending_projection, bending_projection_wide, bending_residual, bending_rest,
+};
 pub use colouring::colour_constraints;
+pub use distance::distance_correction;
 pub use energy_constraint::{pbd_energy_correction, xpbd_energy_correction};
+pub use membrane_wide::{MembraneLanes, stvk_projection_wide};
 pub use triangle::{TriangleRest, deformation_gradient, scatter_stress, triangle_rest};
+pub use wide::W3;

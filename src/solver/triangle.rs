@@ -36,7 +36,7 @@ pub fn triangle_rest(x0: Vec3, x1: Vec3, x2: Vec3) -> Option<TriangleRest> {
 }
 
 /// `F = Ds Dm^-1` with `Ds = [x1 - x0, x2 - x0]`.
-#[inline]
+#[inline(always)]
 pub fn deformation_gradient(x: [Vec3; 3], dm_inv: &[f32; 4]) -> Mat32 {
     let (d1, d2) = (x[1] - x[0], x[2] - x[0]);
     Mat32::new(d1 * dm_inv[0] + d2 * dm_inv[2], d1 * dm_inv[1] + d2 * dm_inv[3])
@@ -44,7 +44,7 @@ pub fn deformation_gradient(x: [Vec3; 3], dm_inv: &[f32; 4]) -> Mat32 {
 
 /// Vertex gradients `scale · P Dm^-T` for x1, x2 and their negated sum for x0 (`scale` is A0, or
 /// A0 times a modulus).
-#[inline]
+#[inline(always)]
 pub fn scatter_stress(p: &Mat32, dm_inv: &[f32; 4], scale: f32) -> [Vec3; 3] {
     let g1 = (p.c0 * dm_inv[0] + p.c1 * dm_inv[1]) * scale;
     let g2 = (p.c0 * dm_inv[2] + p.c1 * dm_inv[3]) * scale;
