@@ -35,6 +35,7 @@ pub(crate) fn naive_goals(lattice: &Lattice) -> Vec<[f64; 3]> {
     let share = |s: usize| mass / count[s] as f64;
     // Each region's R and t.
     let mut fit = vec![(DMat3::IDENTITY, DVec3::ZERO); n];
+    #[allow(clippy::needless_range_loop)] // r is a site number, used for more than indexing `fit`
     for r in 0..n {
         if !layout.is_particle(r) {
             continue;

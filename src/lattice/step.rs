@@ -250,9 +250,9 @@ impl Lattice {
                         if b.diverged.is_none() {
                             let speed = vel.length();
                             let reach = new_x.abs().max_element();
-                            if !(reach <= DIVERGENCE_LIMIT) {
+                            if !new_x.is_finite() || reach > DIVERGENCE_LIMIT {
                                 b.diverged = Some((s, "position", reach));
-                            } else if !(speed <= DIVERGENCE_LIMIT) {
+                            } else if speed.is_nan() || speed > DIVERGENCE_LIMIT {
                                 b.diverged = Some((s, "speed", speed));
                             }
                         }
