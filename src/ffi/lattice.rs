@@ -26,7 +26,8 @@ pub(crate) const LATTICE_DEF_COOKIE: u32 = 0x5EA7_1A77;
 pub struct SoftshellLatticeDef {
     /// Particles along x, >= 1. Default 32.
     pub columns: u32,
-    /// Particles along z, >= 1. Default 32. `columns * rows` is at most 67,108,864.
+    /// Particles along z, >= 1. Default 32. `columns * rows` is at most 67,108,864; a lattice
+    /// takes about 400 bytes per site (530 with region damping), holes included.
     pub rows: u32,
     /// Rest distance between neighbouring particles, m, > 0. Default 0.05.
     pub spacing: f32,
