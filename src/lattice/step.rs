@@ -3,7 +3,7 @@
 //! ```text
 //! 1. moments:  per particle [m~ x', m~ x' x0^T (+ damping moments)], summed along x   (rows in parallel)
 //! 2. fit:      summed along z (row blocks in parallel); per region c, A, R = polar(A), t
-//! 3. spread:   per region [R e_x, R e_z, t (+ rigid motion)], summed along x          (rows in parallel)
+//! 3. spread:   per region [R e_x, R e_z, t (+ rigid motion)], summed along x          (fused with 2, per row)
 //! 4. update:   summed along z (row blocks in parallel); per particle goal g and
 //!              v += damping (v_rigid - v);  v = keep v + alpha (g - x)/h + h (gravity + f/m);  x += h v
 //!              (keep = 1 - velocity_damping h)
@@ -88,27 +88,29 @@ impl<'a> Passes<'a> {
         });
     }
 
-    /// Pass 2: the moments summed along z; every region fitted. Writes the fit channels of each
-    /// region into `fits` and its rotation into `rotation_out`.
+    /// Passes 2 and 3: the moments summed along z; every region fitted; each row of fits summed
+    /// along x at once, while it is in cache (regions to particles, first direction). Writes the
+    /// x-summed fit channels into `spread` and each region's rotation into `rotation_out`.
     fn fit(
         &self,
         pool: &WorkerPool,
         moments: &[f64],
         rotation: &[RotationColumns],
-        fits: &mut [f64],
+        spread: &mut [f64],
         rotation_out: &mut [RotationColumns],
     ) {
         let (columns, rows) = (self.layout.columns(), self.layout.rows());
         let (mc, fc) = (self.moment_channels, self.fit_channels);
         let spacing_sq = self.layout.spacing() * self.layout.spacing();
-        let mut blocks: Vec<(usize, &mut [f64], &mut [RotationColumns])> = fits
+        let mut blocks: Vec<(usize, &mut [f64], &mut [RotationColumns])> = spread
             .chunks_mut(ROW_BLOCK * columns * fc)
             .zip(rotation_out.chunks_mut(ROW_BLOCK * columns))
             .enumerate()
             .map(|(i, (f, r))| (i, f, r))
             .collect();
         pool.for_each_chunk_mut(&mut blocks, 1, |_, block| {
-            for (index, fits, rotation_out) in block.iter_mut() {
+            let mut fits = vec![0.0; columns * fc];
+            for (index, spread, rotation_out) in block.iter_mut() {
                 let k0 = *index * ROW_BLOCK;
                 let mut window = RowWindow::new(moments, columns * mc, rows, self.w, k0);
                 for k in k0..(k0 + ROW_BLOCK).min(rows) {
@@ -116,7 +118,7 @@ impl<'a> Passes<'a> {
                     for c in 0..columns {
                         let s = k * columns + c;
                         let local = s - k0 * columns;
-                        let out = &mut fits[local * fc..(local + 1) * fc];
+                        let out = &mut fits[c * fc..(c + 1) * fc];
                         let rest = &self.rest[s];
                         if rest.share == 0.0 {
                             out.fill(0.0);
@@ -138,18 +140,11 @@ impl<'a> Passes<'a> {
                             );
                         }
                     }
+                    let local_row = (k - k0) * columns * fc;
+                    running_sum_row(&fits, &mut spread[local_row..local_row + columns * fc], fc, self.w);
                     window.advance();
                 }
             }
-        });
-    }
-
-    /// Pass 3: the region fits summed along x (regions to particles), into `out`.
-    fn spread(&self, pool: &WorkerPool, fits: &[f64], out: &mut [f64]) {
-        let columns = self.layout.columns();
-        let ch = self.fit_channels;
-        pool.for_each_chunk_mut(out, columns * ch, |row, out_row| {
-            running_sum_row(&fits[row * columns * ch..(row + 1) * columns * ch], out_row, ch, self.w);
         });
     }
 }
@@ -176,11 +171,9 @@ impl Lattice {
         let n = self.layout.site_count();
         let (mc, fc) = (passes.moment_channels, passes.fit_channels);
         let moments = &mut self.moments;
-        let fits = &mut self.fits;
         passes.moments(&self.pool, &self.x, &self.v, &mut moments[..n * mc]);
-        passes.fit(&self.pool, &moments[..n * mc], &self.rotation, fits, &mut self.rotation_next);
-        passes.spread(&self.pool, fits, &mut moments[..n * fc]);
-        let spread = &moments[..n * fc];
+        passes.fit(&self.pool, &moments[..n * mc], &self.rotation, &mut self.spread, &mut self.rotation_next);
+        let spread = &self.spread[..n * fc];
 
         let h = self.params.time_step as f64;
         let alpha = self.params.stiffness as f64;
@@ -320,12 +313,10 @@ impl Lattice {
         let n = self.layout.site_count();
         let (mc, fc) = (passes.moment_channels, passes.fit_channels);
         let mut moments = vec![0.0; n * mc];
-        let mut fits = vec![0.0; n * fc];
         let mut rotation_out = vec![[0.0; 6]; n];
-        passes.moments(&self.pool, &self.x, &self.v, &mut moments);
-        passes.fit(&self.pool, &moments, &self.rotation, &mut fits, &mut rotation_out);
         let mut spread = vec![0.0; n * fc];
-        passes.spread(&self.pool, &fits, &mut spread);
+        passes.moments(&self.pool, &self.x, &self.v, &mut moments);
+        passes.fit(&self.pool, &moments, &self.rotation, &mut spread, &mut rotation_out);
         let mut goals = vec![[0.0; 3]; n];
         for k0 in (0..rows).step_by(ROW_BLOCK) {
             let mut window = RowWindow::new(&spread, columns * fc, rows, passes.w, k0);
