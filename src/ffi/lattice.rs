@@ -336,7 +336,8 @@ pub unsafe extern "C" fn softshell_lattice_apply_force(
 
 /// Sets the position of every particle from `positions` (x,y,z per particle in particle order,
 /// `float_count` = 3 * particle count floats), e.g. to start from a draped or rotated shape.
-/// Velocities are kept; the rest shape does not change. Returns
+/// Velocities are kept; the rest shape does not change. Pinned particles move to their new
+/// positions too and stay there, so this also drives pins (grab handles) frame by frame. Returns
 /// `SOFTSHELL_STATUS_INVALID_ARGUMENT` (and changes nothing) for a wrong count or a NaN/inf value.
 ///
 /// # Safety
