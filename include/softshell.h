@@ -98,7 +98,8 @@ typedef struct SoftshellLatticeDef {
   // Particles along x, >= 1. Default 32.
   uint32_t columns;
   // Particles along z, >= 1. Default 32. `columns * rows` is at most 67,108,864; a lattice
-  // takes about 400 bytes per site (530 with region damping), holes included.
+  // takes about 320 bytes per site (370 with region damping), holes included, plus
+  // `(2w + 2) * columns` sites' worth of scratch per thread.
   uint32_t rows;
   // Rest distance between neighbouring particles, m, > 0. Default 0.05.
   float spacing;

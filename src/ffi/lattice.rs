@@ -27,7 +27,8 @@ pub struct SoftshellLatticeDef {
     /// Particles along x, >= 1. Default 32.
     pub columns: u32,
     /// Particles along z, >= 1. Default 32. `columns * rows` is at most 67,108,864; a lattice
-    /// takes about 400 bytes per site (530 with region damping), holes included.
+    /// takes about 320 bytes per site (370 with region damping), holes included, plus
+    /// `(2w + 2) * columns` sites' worth of scratch per thread.
     pub rows: u32,
     /// Rest distance between neighbouring particles, m, > 0. Default 0.05.
     pub spacing: f32,
