@@ -110,7 +110,7 @@ impl<'a> Passes<'a> {
         let stride = columns * mc;
         let spacing_sq = self.layout.spacing() * self.layout.spacing();
         let cap = ring_rows(w, rows);
-        let mut blocks: Vec<(usize, &mut [f64], &mut [RotationColumns])> = spread
+        let mut blocks: Vec<FitBlock> = spread
             .chunks_mut(ROW_BLOCK * columns * fc)
             .zip(rotation_out.chunks_mut(ROW_BLOCK * columns))
             .enumerate()
@@ -119,7 +119,7 @@ impl<'a> Passes<'a> {
         // One ring per group of consecutive blocks, one group per worker. A block rebuilds its
         // ring from scratch, so which group it is in changes nothing in the result.
         let per_group = blocks.len().div_ceil(rings.len().max(1));
-        let mut groups: Vec<(&mut [(usize, &mut [f64], &mut [RotationColumns])], &mut Vec<f64>)> =
+        let mut groups: Vec<(&mut [FitBlock], &mut Vec<f64>)> =
             blocks.chunks_mut(per_group).zip(rings.iter_mut()).collect();
         pool.for_each_chunk_mut(&mut groups, 1, |_, group| {
             let (block, ring) = &mut group[0];
@@ -188,6 +188,9 @@ impl<'a> Passes<'a> {
 pub(super) fn ring_rows(w: usize, rows: usize) -> usize {
     (2 * w + 2).min(rows)
 }
+
+/// One block of rows of the fit pass: its index, its rows of x-summed fits, its rotations.
+type FitBlock<'a> = (usize, &'a mut [f64], &'a mut [RotationColumns]);
 
 /// One block of rows of the update pass, with its share of the statistics.
 struct UpdateBlock<'a> {
