@@ -281,7 +281,9 @@ typedef struct SoftshellBodyStats {
 typedef struct SoftshellLatticeDef {
   // Particles along x, >= 1. Default 32.
   uint32_t columns;
-  // Particles along z, >= 1. Default 32. `columns * rows` is at most 67,108,864.
+  // Particles along z, >= 1. Default 32. `columns * rows` is at most 67,108,864; a lattice
+  // takes about 320 bytes per site (370 with region damping), holes included, plus
+  // `(2w + 2) * columns` sites' worth of scratch per thread.
   uint32_t rows;
   // Rest distance between neighbouring particles, m, > 0. Default 0.05.
   float spacing;
@@ -810,7 +812,8 @@ SoftshellStatus softshell_lattice_apply_force(struct SoftshellLattice *lattice,
 
 // Sets the position of every particle from `positions` (x,y,z per particle in particle order,
 // `float_count` = 3 * particle count floats), e.g. to start from a draped or rotated shape.
-// Velocities are kept; the rest shape does not change. Returns
+// Velocities are kept; the rest shape does not change. Pinned particles move to their new
+// positions too and stay there, so this also drives pins (grab handles) frame by frame. Returns
 // `SOFTSHELL_STATUS_INVALID_ARGUMENT` (and changes nothing) for a wrong count or a NaN/inf value.
 //
 // # Safety

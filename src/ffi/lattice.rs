@@ -26,7 +26,9 @@ pub(crate) const LATTICE_DEF_COOKIE: u32 = 0x5EA7_1A77;
 pub struct SoftshellLatticeDef {
     /// Particles along x, >= 1. Default 32.
     pub columns: u32,
-    /// Particles along z, >= 1. Default 32. `columns * rows` is at most 67,108,864.
+    /// Particles along z, >= 1. Default 32. `columns * rows` is at most 67,108,864; a lattice
+    /// takes about 320 bytes per site (370 with region damping), holes included, plus
+    /// `(2w + 2) * columns` sites' worth of scratch per thread.
     pub rows: u32,
     /// Rest distance between neighbouring particles, m, > 0. Default 0.05.
     pub spacing: f32,
@@ -335,7 +337,8 @@ pub unsafe extern "C" fn softshell_lattice_apply_force(
 
 /// Sets the position of every particle from `positions` (x,y,z per particle in particle order,
 /// `float_count` = 3 * particle count floats), e.g. to start from a draped or rotated shape.
-/// Velocities are kept; the rest shape does not change. Returns
+/// Velocities are kept; the rest shape does not change. Pinned particles move to their new
+/// positions too and stay there, so this also drives pins (grab handles) frame by frame. Returns
 /// `SOFTSHELL_STATUS_INVALID_ARGUMENT` (and changes nothing) for a wrong count or a NaN/inf value.
 ///
 /// # Safety

@@ -29,7 +29,7 @@ pub(crate) fn polar_rotation(a: DMat3, previous: DMat3, tiny: f64) -> DMat3 {
     order.sort_by(|&i, &j| sigma_sq[j].total_cmp(&sigma_sq[i]));
     let s1 = sigma_sq[order[0]].max(0.0).sqrt();
     let s2 = sigma_sq[order[1]].max(0.0).sqrt();
-    if !(s1 > tiny) || !s1.is_finite() {
+    if !s1.is_finite() || s1 <= tiny {
         return previous;
     }
     let v1 = v.col(order[0]);
@@ -140,10 +140,10 @@ pub(crate) fn symmetric_eigen(m: DMat3) -> ([f64; 3], DMat3) {
             a[p][r] = a[r][p];
             a[r][q] = s * arp + c * arq;
             a[q][r] = a[r][q];
+            let (vp, vq) = (v[p], v[q]);
             for k in 0..3 {
-                let (vkp, vkq) = (v[p][k], v[q][k]);
-                v[p][k] = c * vkp - s * vkq;
-                v[q][k] = s * vkp + c * vkq;
+                v[p][k] = c * vp[k] - s * vq[k];
+                v[q][k] = s * vp[k] + c * vq[k];
             }
         }
     }

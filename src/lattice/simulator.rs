@@ -10,6 +10,7 @@ use super::damping::{DAMPING_FIT_CHANNELS, DAMPING_MOMENT_CHANNELS};
 use super::layout::LatticeLayout;
 use super::matching::{FIT_CHANNELS, IDENTITY_COLUMNS, MOMENT_CHANNELS, RegionRest, RotationColumns};
 use super::params::LatticeParams;
+use super::step::ring_rows;
 use super::summation::box_sum;
 use crate::error::{Error, Result};
 use crate::parallel::WorkerPool;
@@ -45,10 +46,10 @@ pub struct Lattice {
     pub(super) rotation_next: Vec<RotationColumns>,
     pub(super) pinned: Option<Vec<bool>>,
     pub(super) force: Option<Vec<[f64; 3]>>,
-    /// Scratch: particle moments summed along x, then region fits summed along x.
-    pub(super) moments: Vec<f64>,
-    /// Scratch: what each region hands back to its particles.
-    pub(super) fits: Vec<f64>,
+    /// Scratch: per worker thread, a ring of `2w + 2` rows of particle moments summed along x.
+    pub(super) rings: Vec<Vec<f64>>,
+    /// Scratch: what each region hands back to its particles, summed along x.
+    pub(super) spread: Vec<f64>,
     pub(super) steps: u64,
     pub(super) time: f64,
     pub(super) pool: WorkerPool,
@@ -115,8 +116,8 @@ impl Lattice {
             rotation_next: vec![IDENTITY_COLUMNS; n],
             pinned: None,
             force: None,
-            moments: vec![0.0; n * moment_channels.max(fit_channels)],
-            fits: vec![0.0; n * fit_channels],
+            rings: (0..pool.threads()).map(|_| vec![0.0; ring_rows(w, rows) * columns * moment_channels]).collect(),
+            spread: vec![0.0; n * fit_channels],
             steps: 0,
             time: 0.0,
             pool,
@@ -246,7 +247,8 @@ impl Lattice {
             + (self.rotation.capacity() + self.rotation_next.capacity()) * size_of::<RotationColumns>()
             + self.pinned.as_ref().map_or(0, |p| p.capacity())
             + self.force.as_ref().map_or(0, |f| f.capacity() * v3)
-            + (self.moments.capacity() + self.fits.capacity()) * size_of::<f64>()
+            + (self.rings.iter().map(Vec::capacity).sum::<usize>() + self.spread.capacity()) * size_of::<f64>()
+            + self.rings.capacity() * size_of::<Vec<f64>>()
             + self.pool.memory_bytes()
     }
 }

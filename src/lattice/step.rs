@@ -1,9 +1,11 @@
 //! One FastLSM step (SPEC 3), parallel over rows on the lattice's own worker pool.
 //!
 //! ```text
-//! 1. moments:  per particle [m~ x', m~ x' x0^T (+ damping moments)], summed along x   (rows in parallel)
-//! 2. fit:      summed along z (row blocks in parallel); per region c, A, R = polar(A), t
-//! 3. spread:   per region [R e_x, R e_z, t (+ rigid motion)], summed along x          (rows in parallel)
+//! 1. moments:  per particle [m~ x', m~ x' x0^T (+ damping moments)], summed along x
+//! 2. fit:      summed along z; per region c, A, R = polar(A), t
+//! 3. spread:   per region [R e_x, R e_z, t (+ rigid motion)], summed along x
+//!              (1-3 fused per block of rows, in parallel over blocks: the moments of a block
+//!              live only in a small ring of rows, so they never leave the cache)
 //! 4. update:   summed along z (row blocks in parallel); per particle goal g and
 //!              v += damping (v_rigid - v);  v = keep v + alpha (g - x)/h + h (gravity + f/m);  x += h v
 //!              (keep = 1 - velocity_damping h)
@@ -26,7 +28,7 @@ use super::matching::{
 };
 use super::params::LatticeParams;
 use super::simulator::{Lattice, StepStats};
-use super::summation::{ROW_BLOCK, RowWindow, running_sum_row};
+use super::summation::{ROW_BLOCK, RowWindow, add_row, running_sum_row, shift_rows};
 use crate::error::{Error, ErrorKind, Result};
 use crate::parallel::WorkerPool;
 
@@ -65,70 +67,91 @@ impl<'a> Passes<'a> {
         [x[0] - self.origin[0], x[1] - self.origin[1], x[2] - self.origin[2]]
     }
 
-    /// Pass 1: particle moments, summed along x, into `out` (`moment_channels` per site).
-    fn moments(&self, pool: &WorkerPool, x: &[[f64; 3]], v: &[[f64; 3]], out: &mut [f64]) {
+    /// The particle moments of one row, summed along x, into `out` (`moment_channels` per
+    /// site); `q` is scratch of the same size.
+    fn moment_row(&self, row: usize, x: &[[f64; 3]], v: &[[f64; 3]], q: &mut [f64], out: &mut [f64]) {
         let columns = self.layout.columns();
         let ch = self.moment_channels;
-        pool.for_each_chunk_mut(out, columns * ch, |row, out_row| {
-            let mut q = vec![0.0; columns * ch];
-            for c in 0..columns {
-                let s = row * columns + c;
-                let rest = &self.rest[s];
-                if rest.share == 0.0 {
-                    continue;
-                }
-                let xp = self.relative(x[s]);
-                let q = &mut q[c * ch..(c + 1) * ch];
-                particle_moments(rest.share, xp, self.layout.centred_rest(c, row), &mut q[..MOMENT_CHANNELS]);
-                if self.damping {
-                    damping_moments(rest.share, xp, v[s], &mut q[MOMENT_CHANNELS..]);
-                }
+        q.fill(0.0);
+        for c in 0..columns {
+            let s = row * columns + c;
+            let rest = &self.rest[s];
+            if rest.share == 0.0 {
+                continue;
             }
-            running_sum_row(&q, out_row, ch, self.w);
-        });
+            let xp = self.relative(x[s]);
+            let q = &mut q[c * ch..(c + 1) * ch];
+            particle_moments(rest.share, xp, self.layout.centred_rest(c, row), &mut q[..MOMENT_CHANNELS]);
+            if self.damping {
+                damping_moments(rest.share, xp, v[s], &mut q[MOMENT_CHANNELS..]);
+            }
+        }
+        running_sum_row(q, out, ch, self.w);
     }
 
-    /// Pass 2: the moments summed along z; every region fitted. Writes the fit channels of each
-    /// region into `fits` and its rotation into `rotation_out`.
+    /// Passes 1 to 3 for each block of rows: particle moments summed along x (into a ring of
+    /// `2w + 2` rows, one per worker, so they are used while in cache; a block also computes
+    /// the `w` rows above and below it), summed along z; every region fitted; each row of fits summed
+    /// along x at once (regions to particles, first direction). Writes the x-summed fit channels
+    /// into `spread` and each region's rotation into `rotation_out`.
+    #[allow(clippy::too_many_arguments)]
     fn fit(
         &self,
         pool: &WorkerPool,
-        moments: &[f64],
+        x: &[[f64; 3]],
+        v: &[[f64; 3]],
         rotation: &[RotationColumns],
-        fits: &mut [f64],
+        rings: &mut [Vec<f64>],
+        spread: &mut [f64],
         rotation_out: &mut [RotationColumns],
     ) {
-        let (columns, rows) = (self.layout.columns(), self.layout.rows());
+        let (columns, rows, w) = (self.layout.columns(), self.layout.rows(), self.w);
         let (mc, fc) = (self.moment_channels, self.fit_channels);
+        let stride = columns * mc;
         let spacing_sq = self.layout.spacing() * self.layout.spacing();
-        let mut blocks: Vec<(usize, &mut [f64], &mut [RotationColumns])> = fits
+        let cap = ring_rows(w, rows);
+        let mut blocks: Vec<FitBlock> = spread
             .chunks_mut(ROW_BLOCK * columns * fc)
             .zip(rotation_out.chunks_mut(ROW_BLOCK * columns))
             .enumerate()
             .map(|(i, (f, r))| (i, f, r))
             .collect();
-        pool.for_each_chunk_mut(&mut blocks, 1, |_, block| {
-            for (index, fits, rotation_out) in block.iter_mut() {
+        // One ring per group of consecutive blocks, one group per worker. A block rebuilds its
+        // ring from scratch, so which group it is in changes nothing in the result.
+        let per_group = blocks.len().div_ceil(rings.len().max(1));
+        let mut groups: Vec<(&mut [FitBlock], &mut Vec<f64>)> =
+            blocks.chunks_mut(per_group).zip(rings.iter_mut()).collect();
+        pool.for_each_chunk_mut(&mut groups, 1, |_, group| {
+            let (block, ring) = &mut group[0];
+            let mut fits = vec![0.0; columns * fc];
+            let mut q = vec![0.0; stride];
+            let mut acc = vec![0.0; stride];
+            for (index, spread, rotation_out) in block.iter_mut() {
                 let k0 = *index * ROW_BLOCK;
-                let mut window = RowWindow::new(moments, columns * mc, rows, self.w, k0);
-                for k in k0..(k0 + ROW_BLOCK).min(rows) {
-                    let sums_row = window.current();
+                let k1 = (k0 + ROW_BLOCK).min(rows);
+                ring.resize(cap * stride, 0.0);
+                let slot = |j: usize| (j % cap) * stride..(j % cap + 1) * stride;
+                acc.fill(0.0);
+                for j in k0.saturating_sub(w)..=(k0 + w).min(rows - 1) {
+                    self.moment_row(j, x, v, &mut q, &mut ring[slot(j)]);
+                    add_row(&mut acc, &ring[slot(j)]);
+                }
+                for k in k0..k1 {
                     for c in 0..columns {
                         let s = k * columns + c;
-                        let local = s - k0 * columns;
-                        let out = &mut fits[local * fc..(local + 1) * fc];
+                        let out = &mut fits[c * fc..(c + 1) * fc];
                         let rest = &self.rest[s];
                         if rest.share == 0.0 {
                             out.fill(0.0);
-                            rotation_out[local] = rotation[s];
+                            rotation_out[s - k0 * columns] = rotation[s];
                             continue;
                         }
-                        let sums = &sums_row[c * mc..(c + 1) * mc];
+                        let sums = &acc[c * mc..(c + 1) * mc];
                         // Singular values of A scale as M (w h)^2; far below that, A is zero.
                         let tiny = 1e-12 * rest.mass * spacing_sq;
                         let (rot, t, centroid) = fit_region(&sums[..MOMENT_CHANNELS], rest, &rotation[s], tiny);
                         fit_channels(&rot, t, &mut out[..FIT_CHANNELS]);
-                        rotation_out[local] = rot;
+                        rotation_out[s - k0 * columns] = rot;
                         if self.damping {
                             region_rigid_motion(
                                 &sums[MOMENT_CHANNELS..],
@@ -138,21 +161,36 @@ impl<'a> Passes<'a> {
                             );
                         }
                     }
-                    window.advance();
+                    let local_row = (k - k0) * columns * fc;
+                    running_sum_row(&fits, &mut spread[local_row..local_row + columns * fc], fc, w);
+                    if k + 1 == k1 {
+                        break;
+                    }
+                    // The z running sum: B(k+1) = B(k) + row(k+w+1) - row(k-w).
+                    let entering = k + w + 1 < rows;
+                    if entering {
+                        self.moment_row(k + w + 1, x, v, &mut q, &mut ring[slot(k + w + 1)]);
+                    }
+                    let ring = &ring[..];
+                    shift_rows(
+                        &mut acc,
+                        entering.then(|| &ring[slot(k + w + 1)]),
+                        (k >= w).then(|| &ring[slot(k - w)]),
+                    );
                 }
             }
         });
     }
-
-    /// Pass 3: the region fits summed along x (regions to particles), into `out`.
-    fn spread(&self, pool: &WorkerPool, fits: &[f64], out: &mut [f64]) {
-        let columns = self.layout.columns();
-        let ch = self.fit_channels;
-        pool.for_each_chunk_mut(out, columns * ch, |row, out_row| {
-            running_sum_row(&fits[row * columns * ch..(row + 1) * columns * ch], out_row, ch, self.w);
-        });
-    }
 }
+
+/// Rows in a block's ring of x-summed moments: the `2w + 1` rows of the z window plus the one
+/// entering, or all rows when there are fewer.
+pub(super) fn ring_rows(w: usize, rows: usize) -> usize {
+    (2 * w + 2).min(rows)
+}
+
+/// One block of rows of the fit pass: its index, its rows of x-summed fits, its rotations.
+type FitBlock<'a> = (usize, &'a mut [f64], &'a mut [RotationColumns]);
 
 /// One block of rows of the update pass, with its share of the statistics.
 struct UpdateBlock<'a> {
@@ -174,13 +212,17 @@ impl Lattice {
         let passes = Passes::new(&self.layout, &self.rest, &self.params, &self.x);
         let (columns, rows) = (self.layout.columns(), self.layout.rows());
         let n = self.layout.site_count();
-        let (mc, fc) = (passes.moment_channels, passes.fit_channels);
-        let moments = &mut self.moments;
-        let fits = &mut self.fits;
-        passes.moments(&self.pool, &self.x, &self.v, &mut moments[..n * mc]);
-        passes.fit(&self.pool, &moments[..n * mc], &self.rotation, fits, &mut self.rotation_next);
-        passes.spread(&self.pool, fits, &mut moments[..n * fc]);
-        let spread = &moments[..n * fc];
+        let fc = passes.fit_channels;
+        passes.fit(
+            &self.pool,
+            &self.x,
+            &self.v,
+            &self.rotation,
+            &mut self.rings,
+            &mut self.spread,
+            &mut self.rotation_next,
+        );
+        let spread = &self.spread[..n * fc];
 
         let h = self.params.time_step as f64;
         let alpha = self.params.stiffness as f64;
@@ -250,9 +292,9 @@ impl Lattice {
                         if b.diverged.is_none() {
                             let speed = vel.length();
                             let reach = new_x.abs().max_element();
-                            if !(reach <= DIVERGENCE_LIMIT) {
+                            if !new_x.is_finite() || reach > DIVERGENCE_LIMIT {
                                 b.diverged = Some((s, "position", reach));
-                            } else if !(speed <= DIVERGENCE_LIMIT) {
+                            } else if speed.is_nan() || speed > DIVERGENCE_LIMIT {
                                 b.diverged = Some((s, "speed", speed));
                             }
                         }
@@ -318,14 +360,11 @@ impl Lattice {
         let passes = Passes::new(&self.layout, &self.rest, &self.params, &self.x);
         let (columns, rows) = (self.layout.columns(), self.layout.rows());
         let n = self.layout.site_count();
-        let (mc, fc) = (passes.moment_channels, passes.fit_channels);
-        let mut moments = vec![0.0; n * mc];
-        let mut fits = vec![0.0; n * fc];
+        let fc = passes.fit_channels;
+        let mut rings = vec![Vec::new(); self.pool.threads()];
         let mut rotation_out = vec![[0.0; 6]; n];
-        passes.moments(&self.pool, &self.x, &self.v, &mut moments);
-        passes.fit(&self.pool, &moments, &self.rotation, &mut fits, &mut rotation_out);
         let mut spread = vec![0.0; n * fc];
-        passes.spread(&self.pool, &fits, &mut spread);
+        passes.fit(&self.pool, &self.x, &self.v, &self.rotation, &mut rings, &mut spread, &mut rotation_out);
         let mut goals = vec![[0.0; 3]; n];
         for k0 in (0..rows).step_by(ROW_BLOCK) {
             let mut window = RowWindow::new(&spread, columns * fc, rows, passes.w, k0);

@@ -83,6 +83,28 @@ fn running_sum_row_any(q: &[f64], out: &mut [f64], ch: usize, w: usize) {
     }
 }
 
+/// `acc += row`.
+#[inline]
+pub(crate) fn add_row(acc: &mut [f64], row: &[f64]) {
+    add(acc, row);
+}
+
+/// One step of a running sum: `acc += entering - leaving` (either may be absent at a border).
+#[inline]
+pub(crate) fn shift_rows(acc: &mut [f64], entering: Option<&[f64]>, leaving: Option<&[f64]>) {
+    match (entering, leaving) {
+        // One pass over three rows instead of two over two.
+        (Some(a), Some(b)) => {
+            for ((acc, a), b) in acc.iter_mut().zip(a).zip(b) {
+                *acc += a - b;
+            }
+        }
+        (Some(a), None) => add(acc, a),
+        (None, Some(b)) => sub(acc, b),
+        (None, None) => {}
+    }
+}
+
 #[inline]
 fn add(acc: &mut [f64], row: &[f64]) {
     for (a, b) in acc.iter_mut().zip(row) {
@@ -130,17 +152,7 @@ impl<'a> RowWindow<'a> {
         let (k, w, s) = (self.k, self.w, self.stride);
         let entering = (k + w + 1 < self.rows).then(|| &self.src[(k + w + 1) * s..(k + w + 2) * s]);
         let leaving = (k >= w).then(|| &self.src[(k - w) * s..(k - w + 1) * s]);
-        match (entering, leaving) {
-            // One pass over three rows instead of two over two.
-            (Some(a), Some(b)) => {
-                for ((acc, a), b) in self.acc.iter_mut().zip(a).zip(b) {
-                    *acc += a - b;
-                }
-            }
-            (Some(a), None) => add(&mut self.acc, a),
-            (None, Some(b)) => sub(&mut self.acc, b),
-            (None, None) => {}
-        }
+        shift_rows(&mut self.acc, entering, leaving);
         self.k += 1;
     }
 }
