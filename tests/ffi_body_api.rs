@@ -100,18 +100,26 @@ fn nulls_indices_and_non_finite_inputs_change_nothing() {
         assert!(last_error().contains(&n.to_string()));
         let nan = [0.0, f32::NAN, 0.0];
         assert_eq!(softshell_body_apply_impulse(body.0, 0, nan.as_ptr()), SoftshellStatus::InvalidArgument);
-        assert_eq!(softshell_body_apply_impulse(body.0, n, [1.0f32, 0.0, 0.0].as_ptr()), SoftshellStatus::InvalidArgument);
+        assert_eq!(
+            softshell_body_apply_impulse(body.0, n, [1.0f32, 0.0, 0.0].as_ptr()),
+            SoftshellStatus::InvalidArgument
+        );
         assert_eq!(softshell_body_apply_impulse(body.0, 0, std::ptr::null()), SoftshellStatus::NullArgument);
         assert_eq!(
             softshell_body_add_plane_obstacle(body.0, [0.0f32; 3].as_ptr(), [0.0f32; 3].as_ptr()),
             SoftshellStatus::InvalidArgument
         );
-        assert_eq!(softshell_body_add_sphere_obstacle(body.0, [0.0f32; 3].as_ptr(), 0.0), SoftshellStatus::InvalidArgument);
+        assert_eq!(
+            softshell_body_add_sphere_obstacle(body.0, [0.0f32; 3].as_ptr(), 0.0),
+            SoftshellStatus::InvalidArgument
+        );
         assert_eq!(softshell_body_break_edge(body.0, 0, 0), SoftshellStatus::InvalidArgument);
         assert_eq!(softshell_body_break_edge(body.0, 0, n + 5), SoftshellStatus::InvalidArgument);
         // Two vertices that are not neighbours.
-        let far = (0..n).max_by(|&a, &b| before.position(a as usize)[1].total_cmp(&before.position(b as usize)[1])).unwrap();
-        let low = (0..n).min_by(|&a, &b| before.position(a as usize)[1].total_cmp(&before.position(b as usize)[1])).unwrap();
+        let far =
+            (0..n).max_by(|&a, &b| before.position(a as usize)[1].total_cmp(&before.position(b as usize)[1])).unwrap();
+        let low =
+            (0..n).min_by(|&a, &b| before.position(a as usize)[1].total_cmp(&before.position(b as usize)[1])).unwrap();
         assert_eq!(softshell_body_break_edge(body.0, far, low), SoftshellStatus::InvalidArgument);
         assert!(last_error().contains("not joined by a spring"), "{}", last_error());
         // A step with NULL stats is fine.
@@ -134,7 +142,10 @@ fn obstacles_pins_and_impulses_act() {
     let body = body(&p, &t, &def);
     // SAFETY: live body, float[3] arguments.
     unsafe {
-        assert_eq!(softshell_body_add_plane_obstacle(body.0, [0.0f32, 0.2, 0.0].as_ptr(), [0.0f32, 2.0, 0.0].as_ptr()), SoftshellStatus::Ok);
+        assert_eq!(
+            softshell_body_add_plane_obstacle(body.0, [0.0f32, 0.2, 0.0].as_ptr(), [0.0f32, 2.0, 0.0].as_ptr()),
+            SoftshellStatus::Ok
+        );
         assert_eq!(softshell_body_add_sphere_obstacle(body.0, [3.0f32, 0.0, 0.0].as_ptr(), 1.0), SoftshellStatus::Ok);
         assert_eq!(softshell_body_apply_impulse(body.0, 0, [0.0f32, 0.0, 0.01].as_ptr()), SoftshellStatus::Ok);
     }

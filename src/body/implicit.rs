@@ -213,6 +213,22 @@ pub(crate) fn substep(
         }
     }
     s.gas_dot = gas_dot;
+    // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling term
+    // of the matrix sums to zero); a truncated solve leaves a small error there, removed by a
+    // uniform correction. Not with pins: their reactions are external forces.
+    if model.inv_mass.iter().zip(model.mass).all(|(&w, &m)| w > 0.0 || m == 0.0) {
+        let (mut error, mut mass) = (glam::DVec3::ZERO, 0.0f64);
+        for i in 0..n {
+            error += s.rhs[i].as_dvec3() - s.dv[i].as_dvec3() * model.mass[i] as f64;
+            mass += model.mass[i] as f64;
+        }
+        if mass > 0.0 {
+            let correction = (error / mass).as_vec3();
+            for dv in s.dv.iter_mut() {
+                *dv += correction;
+            }
+        }
+    }
     for i in 0..n {
         if model.inv_mass[i] == 0.0 {
             continue;

@@ -111,7 +111,11 @@ pub(crate) fn substep(
                     let vol = gas.volume[f].max(gas.v_min[f]).max(f64::MIN_POSITIVE);
                     let target = h2 * gas.n_rt[f] / vol;
                     let slope = if gas.volume[f] > gas.v_min[f] { h2 * gas.n_rt[f] / (vol * vol) } else { 0.0 };
-                    -(s.gas_lambda[f] - target) / (1.0 + slope * s.gas_norm[f])
+                    let delta = -(s.gas_lambda[f] - target) / (1.0 + slope * s.gas_norm[f]);
+                    // Trust region: one update changes the volume by at most a tenth (the
+                    // linearisation is only good that far; shreds near zero volume need it).
+                    let limit = 0.1 * vol / s.gas_norm[f].max(f64::MIN_POSITIVE);
+                    delta.clamp(-limit, limit)
                 })
                 .collect();
             for (f, d) in deltas.iter().enumerate() {
