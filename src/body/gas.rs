@@ -217,12 +217,14 @@ impl Gas {
     /// Hands the gas of the fragments before a topology change to those after it: each new
     /// fragment's parent is the old fragment of its first surviving face, and a parent's nRT is
     /// split between its children in proportion to their (capped) volumes, so the pressure does
-    /// not jump. Shreds, children with less than [`SHRED_FRACTION`] of their parent's volume, get
+    /// not jump. Shreds, children with less than [`SHRED_FRACTION`] of their parent's volume before
+    /// the change, get
     /// no gas: it escapes through the burst (a gas in a near-zero volume would be arbitrarily
     /// stiff, `∂P/∂V = -P/V`).
     pub fn inherit(
         &mut self,
         old_n_rt: &[f64],
+        old_volume: &[f64],
         old_face_fragment: &[u32],
         new_face_fragment: &[u32],
         x: &[Vec3],
@@ -246,7 +248,7 @@ impl Gas {
             }
         }
         for f in 0..n {
-            if parent[f] != u32::MAX && self.volume[f] < SHRED_FRACTION * total[parent[f] as usize] {
+            if parent[f] != u32::MAX && self.volume[f] < SHRED_FRACTION * old_volume[parent[f] as usize].abs() {
                 parent[f] = u32::MAX;
             }
         }
