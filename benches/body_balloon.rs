@@ -23,14 +23,40 @@ use softshell::ffi::{SoftshellBody, SoftshellStatus};
 fn icosphere(levels: u32) -> (Vec<f32>, Vec<u32>) {
     let t = (1.0 + 5.0f64.sqrt()) / 2.0;
     let mut p: Vec<[f64; 3]> = vec![
-        [-1.0, t, 0.0], [1.0, t, 0.0], [-1.0, -t, 0.0], [1.0, -t, 0.0],
-        [0.0, -1.0, t], [0.0, 1.0, t], [0.0, -1.0, -t], [0.0, 1.0, -t],
-        [t, 0.0, -1.0], [t, 0.0, 1.0], [-t, 0.0, -1.0], [-t, 0.0, 1.0],
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
     ];
     let mut f: Vec<[u32; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
-        [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
-        [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     for _ in 0..levels {
         let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
@@ -67,7 +93,10 @@ fn sum_rest_squared(positions: &[f32], triangles: &[u32]) -> f64 {
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
             if seen.insert((a.min(b), a.max(b))) {
-                let d: f64 = (0..3).map(|c| (positions[3 * a as usize + c] - positions[3 * b as usize + c]) as f64).map(|x| x * x).sum();
+                let d: f64 = (0..3)
+                    .map(|c| (positions[3 * a as usize + c] - positions[3 * b as usize + c]) as f64)
+                    .map(|x| x * x)
+                    .sum();
                 sum += d;
             }
         }
@@ -77,6 +106,7 @@ fn sum_rest_squared(positions: &[f32], triangles: &[u32]) -> f64 {
 
 struct Run {
     ms_per_step: f64,
+    iterations: f64,
     settled: f64,
     low: f64,
     high: f64,
@@ -95,7 +125,13 @@ fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usiz
     // SAFETY: live arrays, def and out-pointers.
     unsafe {
         assert_eq!(
-            softshell_mesh_from_arrays(positions.as_ptr(), positions.len() / 3, triangles.as_ptr(), triangles.len() / 3, &mut mesh),
+            softshell_mesh_from_arrays(
+                positions.as_ptr(),
+                positions.len() / 3,
+                triangles.as_ptr(),
+                triangles.len() / 3,
+                &mut mesh
+            ),
             SoftshellStatus::Ok
         );
         assert_eq!(softshell_body_new(mesh, def, &mut body), SoftshellStatus::Ok, "{}", last_error());
@@ -112,6 +148,7 @@ fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usiz
     let mut times = Vec::with_capacity(steps);
     let mut failed = None;
     let mut crack_time = None;
+    let mut iterations = 0u64;
     for k in 0..steps {
         if Some(k) == crack_at {
             // A cut by hand just before this step makes the next break_strain step crack: here we
@@ -134,6 +171,7 @@ fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usiz
             crack_time = Some(elapsed);
         }
         times.push(elapsed);
+        iterations += stats.solver_iterations;
         volumes.push(stats.volume / v0);
     }
     // SAFETY: made above, freed once.
@@ -144,6 +182,7 @@ fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usiz
     let median = sorted.get(sorted.len() / 2).copied().unwrap_or(f64::NAN);
     Run {
         ms_per_step: times.iter().sum::<f64>() / times.len().max(1) as f64 * 1e3,
+        iterations: iterations as f64 / times.len().max(1) as f64,
         settled: tail.iter().sum::<f64>() / tail.len().max(1) as f64,
         low: tail.iter().copied().fold(f64::INFINITY, f64::min),
         high: tail.iter().copied().fold(f64::NEG_INFINITY, f64::max),
@@ -162,9 +201,16 @@ fn first_neighbour(triangles: &[u32], v: u32) -> u32 {
 fn volume_factor(positions: &[f32], triangles: &[u32]) -> f64 {
     let mut v = 0.0f64;
     for t in triangles.chunks_exact(3) {
-        let p = |i: u32| [positions[3 * i as usize] as f64, positions[3 * i as usize + 1] as f64, positions[3 * i as usize + 2] as f64];
+        let p = |i: u32| {
+            [
+                positions[3 * i as usize] as f64,
+                positions[3 * i as usize + 1] as f64,
+                positions[3 * i as usize + 2] as f64,
+            ]
+        };
         let (a, b, c) = (p(t[0]), p(t[1]), p(t[2]));
-        v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0]);
+        v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+            + a[2] * (b[0] * c[1] - b[1] * c[0]);
     }
     v / 6.0 / (4.0 / 3.0 * std::f64::consts::PI)
 }
@@ -178,7 +224,10 @@ fn main() {
     let n_rt = 2500.0f64;
     let s = 1.05f64.cbrt();
     let ks = 3.0 * n_rt / (s * (s - 1.0) * sum_l2);
-    println!("softshell body_balloon: {vertices} vertices, {} triangles, sum L0^2 = {sum_l2:.3} m^2", triangles.len() / 3);
+    println!(
+        "softshell body_balloon: {vertices} vertices, {} triangles, sum L0^2 = {sum_l2:.3} m^2",
+        triangles.len() / 3
+    );
     println!("K_s = {ks:.1} N/m from K_s s (s-1) sum L0^2 = 3 nRT with s^3 = 1.05 (analytic V/V0 without gravity)");
     let base = {
         let mut d = softshell_body_def_default();
@@ -190,6 +239,9 @@ fn main() {
         d.ground_height = 0.0;
         d.friction = 0.5;
         d.threads = 2;
+        if let Some(it) = std::env::var("BODY_ITERATIONS").ok().and_then(|v| v.parse().ok()) {
+            d.iterations = it;
+        }
         d
     };
     // Zero gravity: the settled volume against the analytic equilibrium.
@@ -201,10 +253,11 @@ fn main() {
     };
     let r = run(&positions, &triangles, &zero_g, steps, None);
     println!(
-        "zero gravity, implicit Euler: settled V/V0 {:.4} (analytic 1.0500, error {:+.2}%), {:.2} ms/step{}",
+        "zero gravity, implicit Euler: settled V/V0 {:.4} (analytic 1.0500, error {:+.2}%), {:.2} ms/step, {:.1} CG iterations/step{}",
         r.settled,
         (r.settled / 1.05 - 1.0) * 100.0,
         r.ms_per_step,
+        r.iterations,
         r.failed.map(|f| format!(", FAILED {f}")).unwrap_or_default()
     );
     // Dropped from 1.5 m: lowest point 1.5 m above the ground.
@@ -212,7 +265,7 @@ fn main() {
         c[1] += 2.5;
     }
     println!("\ndropped on the ground, {steps} steps (V/V0 over the last 100 steps):");
-    println!("{:<34} {:>9} {:>9} {:>9} {:>9}", "integrator", "ms/step", "V/V0", "min", "max");
+    println!("{:<34} {:>9} {:>9} {:>9} {:>9} {:>9}", "integrator", "ms/step", "V/V0", "min", "max", "CG it.");
     let configs: Vec<(&str, u32, u32, u32, f32)> = vec![
         ("implicit Euler (default)", SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1, 10, 1.0 / 60.0),
         ("implicit Euler, h = 1/15", SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1, 10, 1.0 / 15.0),
@@ -226,13 +279,20 @@ fn main() {
         let mut d = base;
         d.integrator = integrator;
         d.substeps = substeps;
-        d.iterations = iterations;
+        if integrator != SOFTSHELL_INTEGRATOR_IMPLICIT_EULER {
+            d.iterations = iterations;
+        }
         d.time_step = h;
         let n = ((steps as f32) * (1.0 / 60.0) / h).round() as usize;
         let r = run(&positions, &triangles, &d, n, None);
         match r.failed {
-            None => println!("{name:<34} {:>9.2} {:>9.4} {:>9.4} {:>9.4}", r.ms_per_step, r.settled, r.low, r.high),
-            Some(f) => println!("{name:<34} {:>9.2} UNSTABLE ({})", r.ms_per_step, f.chars().take(120).collect::<String>()),
+            None => println!(
+                "{name:<34} {:>9.2} {:>9.4} {:>9.4} {:>9.4} {:>9.1}",
+                r.ms_per_step, r.settled, r.low, r.high, r.iterations
+            ),
+            Some(f) => {
+                println!("{name:<34} {:>9.2} UNSTABLE ({})", r.ms_per_step, f.chars().take(120).collect::<String>())
+            }
         }
     }
     // Cost of a cracking step: springs break at 2 % strain beyond what the settled ball has.

@@ -29,6 +29,8 @@ pub(crate) struct ImplicitScratch {
     /// Per fragment `h² P/V` (gas rank-one term) and a per-fragment dot product buffer.
     gas_coef: Vec<f64>,
     gas_dot: Vec<f64>,
+    /// Δv of the previous substep (the warm start), reset when the vertex count changes.
+    previous_dv: Vec<Vec3>,
 }
 
 impl ImplicitScratch {
@@ -41,7 +43,8 @@ impl ImplicitScratch {
             + self.z.capacity()
             + self.p.capacity()
             + self.ap.capacity()
-            + self.diag.capacity())
+            + self.diag.capacity()
+            + self.previous_dv.capacity())
             * 12
             + self.blocks.capacity() * 20
             + (self.gas_coef.capacity() + self.gas_dot.capacity()) * 8
@@ -160,12 +163,17 @@ pub(crate) fn substep(
         }
     }
 
-    // Preconditioned conjugate gradients, started from the free-fall guess Δv = h g: it solves
-    // the rigid translation exactly, the mode that a Jacobi preconditioner dominated by stiff
-    // springs resolves worst.
-    let g = model.settings.gravity * h;
+    // Preconditioned conjugate gradients, warm-started from the previous substep's Δv (the
+    // velocity change varies slowly from step to step), or on the first substep from the
+    // free-fall guess Δv = h g: either solves the rigid translation, the mode that a Jacobi
+    // preconditioner dominated by stiff springs resolves worst.
+    if s.previous_dv.len() != n {
+        let g = model.settings.gravity * h;
+        s.previous_dv.clear();
+        s.previous_dv.resize(n, g);
+    }
     for i in 0..n {
-        s.dv[i] = if model.inv_mass[i] == 0.0 { Vec3::ZERO } else { g };
+        s.dv[i] = if model.inv_mass[i] == 0.0 { Vec3::ZERO } else { s.previous_dv[i] };
     }
     let mut ap = std::mem::take(&mut s.ap);
     let mut gas_dot = std::mem::take(&mut s.gas_dot);
@@ -229,6 +237,7 @@ pub(crate) fn substep(
             }
         }
     }
+    s.previous_dv.copy_from_slice(&s.dv);
     for i in 0..n {
         if model.inv_mass[i] == 0.0 {
             continue;

@@ -513,7 +513,7 @@ impl Body {
                 (explicit::substep(&model, gas, x, v, h, self.settings.integrator == Integrator::SymplecticEuler, s), 0)
             }
             Scratch::Implicit(s) => {
-                implicit::substep(&model, gas, x, v, h, (10 * self.settings.iterations as usize).max(20), s)
+                implicit::substep(&model, gas, x, v, h, (10 * self.settings.iterations as usize).max(40), s)
             }
             Scratch::Xpbd(s) => (xpbd::substep(&model, gas, x, v, h, self.settings.iterations, &self.obstacles, s), 0),
         };

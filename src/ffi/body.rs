@@ -82,7 +82,7 @@ pub struct SoftshellBodyDef {
     /// on it.
     pub threads: u32,
     /// XPBD Gauss-Seidel sweeps per substep; the implicit integrator allows 10 times as many
-    /// conjugate-gradient iterations (at least 20). In [1, 1000]. Default 10.
+    /// conjugate-gradient iterations (at least 40). In [1, 1000]. Default 10.
     pub iterations: u32,
     /// Set by `softshell_body_def_default`; do not touch.
     pub internal_cookie: u32,
