@@ -80,7 +80,7 @@ pub(crate) fn release(
     topology: &Topology,
     triangles: &mut Vec<[u32; 3]>,
     nodes: &mut Nodes,
-    touched: &mut Vec<bool>,
+    touched: &mut [bool],
     v: u32,
 ) -> bool {
     if touched[v as usize] {

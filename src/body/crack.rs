@@ -63,13 +63,13 @@ pub(crate) fn fans(fracture: &Fracture, topology: &Topology, triangles: &[[u32; 
     }
     let mut groups: Vec<Vec<u32>> = Vec::new();
     let mut root_group: Vec<usize> = vec![usize::MAX; faces.len()];
-    for i in 0..faces.len() {
+    for (i, &face) in faces.iter().enumerate() {
         let root = find(&mut parent, i);
         if root_group[root] == usize::MAX {
             root_group[root] = groups.len();
             groups.push(Vec::new());
         }
-        groups[root_group[root]].push(faces[i]);
+        groups[root_group[root]].push(face);
     }
     groups
 }

@@ -180,18 +180,22 @@ pub(crate) fn substep(
     apply(model, gas.as_deref(), s, &s.dv, &mut ap, &mut gas_dot);
     s.ap = ap;
     s.gas_dot = gas_dot;
+    // The Jacobi preconditioner, inverted once (stored in `diag`).
+    for d in s.diag.iter_mut() {
+        *d = Vec3::ONE / d.max(Vec3::splat(f32::MIN_POSITIVE));
+    }
+    let mut rz = 0.0f64;
     for i in 0..n {
         s.r[i] = s.rhs[i] - s.ap[i];
-    }
-    for i in 0..n {
-        s.z[i] = s.r[i] / s.diag[i].max(Vec3::splat(f32::MIN_POSITIVE));
+        s.z[i] = s.r[i] * s.diag[i];
+        rz += s.r[i].dot(s.z[i]) as f64;
     }
     s.p.copy_from_slice(&s.z);
-    let mut rz = dot(&s.r, &s.z);
     let r0 = dot(&s.rhs, &s.rhs).sqrt();
     let mut gas_dot = std::mem::take(&mut s.gas_dot);
     let mut iterations = 0;
     if r0 > 0.0 {
+        let tolerance = (CG_TOLERANCE as f64 * r0).powi(2);
         while iterations < max_iterations {
             iterations += 1;
             let mut ap = std::mem::take(&mut s.ap);
@@ -202,17 +206,18 @@ pub(crate) fn substep(
                 break;
             }
             let alpha = (rz / pap) as f32;
+            // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass.
+            let (mut rr, mut rz_next) = (0.0f64, 0.0f64);
             for i in 0..n {
                 s.dv[i] += s.p[i] * alpha;
                 s.r[i] -= s.ap[i] * alpha;
+                s.z[i] = s.r[i] * s.diag[i];
+                rr += s.r[i].length_squared() as f64;
+                rz_next += s.r[i].dot(s.z[i]) as f64;
             }
-            if dot(&s.r, &s.r).sqrt() <= CG_TOLERANCE as f64 * r0 {
+            if rr <= tolerance {
                 break;
             }
-            for i in 0..n {
-                s.z[i] = s.r[i] / s.diag[i].max(Vec3::splat(f32::MIN_POSITIVE));
-            }
-            let rz_next = dot(&s.r, &s.z);
             let beta = (rz_next / rz) as f32;
             rz = rz_next;
             for i in 0..n {

@@ -11,7 +11,7 @@ use glam::Vec3;
 
 use super::forces::{Model, external_forces};
 use super::gas::Gas;
-use super::obstacles::{Obstacle, project, respond};
+use super::obstacles::{Obstacle, project};
 
 /// Scratch of the XPBD integrator (allocated only when it is used).
 #[derive(Default)]
@@ -57,6 +57,7 @@ pub(crate) fn distance_delta_lambda(
 }
 
 /// One substep of length `h` with `iterations` Gauss-Seidel sweeps; returns the wind work, J.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn substep(
     model: &Model,
     mut gas: Option<&mut Gas>,
@@ -182,7 +183,6 @@ pub(crate) fn substep(
                     tangential *= (1.0 - friction * removed / speed).max(0.0);
                 }
                 v[i] = tangential + normal * bounce;
-                let _ = respond;
             }
         }
     }
