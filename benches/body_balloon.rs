@@ -267,6 +267,7 @@ fn main() {
     println!("\ndropped on the ground, {steps} steps (V/V0 over the last 100 steps):");
     println!("{:<34} {:>9} {:>9} {:>9} {:>9} {:>9}", "integrator", "ms/step", "V/V0", "min", "max", "CG it.");
     let configs: Vec<(&str, u32, u32, u32, f32)> = vec![
+        ("implicit Euler (default), 1 thread", SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1, 0, 1.0 / 60.0),
         ("implicit Euler (default)", SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1, 10, 1.0 / 60.0),
         ("implicit Euler, h = 1/15", SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1, 10, 1.0 / 15.0),
         ("XPBD, 5 substeps x 2 iterations", SOFTSHELL_INTEGRATOR_XPBD, 5, 2, 1.0 / 60.0),
@@ -281,6 +282,8 @@ fn main() {
         d.substeps = substeps;
         if integrator != SOFTSHELL_INTEGRATOR_IMPLICIT_EULER {
             d.iterations = iterations;
+        } else if iterations == 0 {
+            d.threads = 1; // the "1 thread" row
         }
         d.time_step = h;
         let n = ((steps as f32) * (1.0 / 60.0) / h).round() as usize;

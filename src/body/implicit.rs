@@ -11,6 +11,7 @@ use glam::Vec3;
 use super::forces::{Model, all_forces};
 use super::gas::Gas;
 use super::springs::spring_block;
+use crate::parallel::WorkerPool;
 
 /// Scratch of the implicit integrator (allocated only when it is used).
 #[derive(Default)]
@@ -52,19 +53,36 @@ impl ImplicitScratch {
 }
 
 /// Relative residual at which conjugate gradients stop.
-const CG_TOLERANCE: f32 = 1e-5;
+const CG_TOLERANCE: f32 = 1e-4;
 
-fn apply(model: &Model, gas: Option<&Gas>, s: &ImplicitScratch, input: &[Vec3], out: &mut [Vec3], gas_dot: &mut [f64]) {
-    for (i, o) in out.iter_mut().enumerate() {
-        *o = input[i] * model.mass[i];
-    }
-    for (&[i, j], &(alpha, beta, u)) in model.springs.ends.iter().zip(&s.blocks) {
-        let (i, j) = (i as usize, j as usize);
-        let d = input[i] - input[j];
-        let y = d * alpha + u * (beta * u.dot(d));
-        out[i] += y;
-        out[j] -= y;
-    }
+/// Vertices per parallel chunk (fixed, so the result does not depend on the thread count).
+const CHUNK: usize = 2048;
+
+/// `out = A input` for the system matrix `M - h² K - h D` (pinned rows zero). The spring part is
+/// gathered per vertex in a fixed order, in parallel chunks; the gas rank-one part is serial.
+fn apply(
+    model: &Model,
+    pool: &WorkerPool,
+    gas: Option<&Gas>,
+    s: &ImplicitScratch,
+    input: &[Vec3],
+    out: &mut [Vec3],
+    gas_dot: &mut [f64],
+) {
+    let springs = model.springs;
+    let blocks = &s.blocks;
+    pool.for_each_chunk_mut(out, CHUNK, |c, chunk| {
+        for (k, o) in chunk.iter_mut().enumerate() {
+            let i = c * CHUNK + k;
+            let mut acc = input[i] * model.mass[i];
+            for &(spring, j) in springs.around(i) {
+                let (alpha, beta, u) = blocks[spring as usize];
+                let d = input[i] - input[j as usize];
+                acc += d * alpha + u * (beta * u.dot(d));
+            }
+            *o = acc;
+        }
+    });
     if let Some(gas) = gas {
         gas_dot.iter_mut().for_each(|d| *d = 0.0);
         for (i, g) in s.gradient.iter().enumerate() {
@@ -100,6 +118,7 @@ pub(crate) fn substep(
     v: &mut [Vec3],
     h: f32,
     max_iterations: usize,
+    pool: &WorkerPool,
     s: &mut ImplicitScratch,
 ) -> (f64, usize) {
     let n = x.len();
@@ -177,7 +196,7 @@ pub(crate) fn substep(
     }
     let mut ap = std::mem::take(&mut s.ap);
     let mut gas_dot = std::mem::take(&mut s.gas_dot);
-    apply(model, gas.as_deref(), s, &s.dv, &mut ap, &mut gas_dot);
+    apply(model, pool, gas.as_deref(), s, &s.dv, &mut ap, &mut gas_dot);
     s.ap = ap;
     s.gas_dot = gas_dot;
     // The Jacobi preconditioner, inverted once (stored in `diag`).
@@ -199,7 +218,7 @@ pub(crate) fn substep(
         while iterations < max_iterations {
             iterations += 1;
             let mut ap = std::mem::take(&mut s.ap);
-            apply(model, gas.as_deref(), s, &s.p, &mut ap, &mut gas_dot);
+            apply(model, pool, gas.as_deref(), s, &s.p, &mut ap, &mut gas_dot);
             s.ap = ap;
             let pap = dot(&s.p, &s.ap);
             if pap <= 0.0 || !pap.is_finite() {

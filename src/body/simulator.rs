@@ -513,7 +513,8 @@ impl Body {
                 (explicit::substep(&model, gas, x, v, h, self.settings.integrator == Integrator::SymplecticEuler, s), 0)
             }
             Scratch::Implicit(s) => {
-                implicit::substep(&model, gas, x, v, h, (10 * self.settings.iterations as usize).max(40), s)
+                let max_iterations = (10 * self.settings.iterations as usize).max(40);
+                implicit::substep(&model, gas, x, v, h, max_iterations, &self.pool, s)
             }
             Scratch::Xpbd(s) => (xpbd::substep(&model, gas, x, v, h, self.settings.iterations, &self.obstacles, s), 0),
         };
