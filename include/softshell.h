@@ -227,7 +227,7 @@ typedef struct SoftshellBodyDef {
   // on it.
   uint32_t threads;
   // XPBD Gauss-Seidel sweeps per substep; the implicit integrator allows 10 times as many
-  // conjugate-gradient iterations (at least 20). In [1, 1000]. Default 10.
+  // conjugate-gradient iterations (at least 40). In [1, 1000]. Default 10.
   uint32_t iterations;
   // Set by `softshell_body_def_default`; do not touch.
   uint32_t internal_cookie;

@@ -30,7 +30,8 @@ fn bad_defs_are_refused_with_the_field_named() {
     let (status, message) = try_body(&p, &t, &zeroed).err().unwrap();
     assert_eq!(status, SoftshellStatus::InvalidArgument);
     assert!(message.contains("softshell_body_def_default"), "{message}");
-    let cases: Vec<(&str, Box<dyn Fn(&mut SoftshellBodyDef)>)> = vec![
+    type Edit = Box<dyn Fn(&mut SoftshellBodyDef)>;
+    let cases: Vec<(&str, Edit)> = vec![
         ("time_step", Box::new(|d| d.time_step = f32::NAN)),
         ("time_step", Box::new(|d| d.time_step = 0.0)),
         ("substeps", Box::new(|d| d.substeps = 0)),

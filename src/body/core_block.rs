@@ -7,7 +7,7 @@
 //! block underneath; the surface left behind is closed by a cap of k faces from another new centre
 //! c over the original ring. Both pieces stay closed, manifold and oriented, every new edge is a
 //! spring with its rest length from the rest positions, and no existing vertex moves or is
-//! renumbered. Mass: u_i' takes u_i's share of the fan's area, c' half of v's mass (at v's
+//! renumbered. Mass: u_i' takes u_i's share of the fan's rest area, c' half of v's mass (at v's
 //! velocity), c a sixth of each remaining ring mass (at their mean velocity): mass and momentum
 //! are conserved exactly. The gas of the body is shared between the block and the rest in
 //! proportion to their volumes, so neither pressure jumps.
@@ -68,7 +68,7 @@ fn vertex_area(nodes: &Nodes, topology: &Topology, triangles: &[[u32; 3]], v: u3
 }
 
 fn face_area(nodes: &Nodes, t: [u32; 3]) -> f64 {
-    let p = t.map(|i| nodes.x[i as usize].as_dvec3());
+    let p = t.map(|i| nodes.rest[i as usize].as_dvec3());
     0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length()
 }
 
@@ -80,7 +80,7 @@ pub(crate) fn release(
     topology: &Topology,
     triangles: &mut Vec<[u32; 3]>,
     nodes: &mut Nodes,
-    touched: &mut Vec<bool>,
+    touched: &mut [bool],
     v: u32,
 ) -> bool {
     if touched[v as usize] {

@@ -1,7 +1,7 @@
 //! Cracks (SPEC 2.4, edge-aligned form of the virtual node algorithm): a broken spring marks
 //! its edge broken on both faces; then at each end vertex the fan of faces is split at the broken
 //! edges, and every fan after the first gets a copy of the vertex (same x and v, mass split by
-//! fan area, appended so that no survivor is renumbered). Faces keep their index and winding;
+//! fan rest area, appended so that no survivor is renumbered). Faces keep their index and winding;
 //! only the corner that named the vertex is re-instanced.
 //!
 //! Mass and momentum are conserved exactly (the copies share the velocity); positions do not move.
@@ -63,19 +63,21 @@ pub(crate) fn fans(fracture: &Fracture, topology: &Topology, triangles: &[[u32; 
     }
     let mut groups: Vec<Vec<u32>> = Vec::new();
     let mut root_group: Vec<usize> = vec![usize::MAX; faces.len()];
-    for i in 0..faces.len() {
+    for (i, &face) in faces.iter().enumerate() {
         let root = find(&mut parent, i);
         if root_group[root] == usize::MAX {
             root_group[root] = groups.len();
             groups.push(Vec::new());
         }
-        groups[root_group[root]].push(faces[i]);
+        groups[root_group[root]].push(face);
     }
     groups
 }
 
+/// Rest area of a triangle: masses are split by rest area, which is never zero (a crumpled,
+/// zero-area fan must not end up with no mass).
 fn triangle_area(nodes: &Nodes, t: [u32; 3]) -> f64 {
-    let p = t.map(|i| nodes.x[i as usize].as_dvec3());
+    let p = t.map(|i| nodes.rest[i as usize].as_dvec3());
     0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length()
 }
 

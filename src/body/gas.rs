@@ -38,6 +38,9 @@ pub(crate) struct Gas {
     pub clamped: bool,
 }
 
+/// A fragment with less than this fraction of its parent's volume is a shred and keeps no gas.
+pub(crate) const SHRED_FRACTION: f64 = 1e-3;
+
 /// Fraction of a fragment's volume at gas assignment below which the pressure is clamped.
 const CLAMP_FRACTION: f64 = 1e-2;
 
@@ -214,10 +217,14 @@ impl Gas {
     /// Hands the gas of the fragments before a topology change to those after it: each new
     /// fragment's parent is the old fragment of its first surviving face, and a parent's nRT is
     /// split between its children in proportion to their (capped) volumes, so the pressure does
-    /// not jump. Children with no volume (open shreds) get no gas.
+    /// not jump. Shreds, children with less than [`SHRED_FRACTION`] of their parent's volume before
+    /// the change, get
+    /// no gas: it escapes through the burst (a gas in a near-zero volume would be arbitrarily
+    /// stiff, `∂P/∂V = -P/V`).
     pub fn inherit(
         &mut self,
         old_n_rt: &[f64],
+        old_volume: &[f64],
         old_face_fragment: &[u32],
         new_face_fragment: &[u32],
         x: &[Vec3],
@@ -235,6 +242,18 @@ impl Gas {
         self.v_min.iter_mut().for_each(|v| *v = 0.0);
         self.measure(x, triangles, new_face_fragment);
         let mut total = vec![0.0f64; old_n_rt.len()];
+        for f in 0..n {
+            if parent[f] != u32::MAX {
+                total[parent[f] as usize] += self.volume[f].max(0.0);
+            }
+        }
+        for f in 0..n {
+            if parent[f] != u32::MAX && self.volume[f] < SHRED_FRACTION * old_volume[parent[f] as usize].abs() {
+                parent[f] = u32::MAX;
+            }
+        }
+        // Shares over the children that keep gas.
+        total.iter_mut().for_each(|t| *t = 0.0);
         for f in 0..n {
             if parent[f] != u32::MAX {
                 total[parent[f] as usize] += self.volume[f].max(0.0);

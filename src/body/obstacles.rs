@@ -52,19 +52,6 @@ pub(crate) fn project(x: &mut Vec3, obstacles: &[Obstacle]) -> Option<Vec3> {
     normal
 }
 
-/// Restitution and Coulomb friction on the velocity of a vertex in contact along `n`.
-pub(crate) fn respond(v: &mut Vec3, n: Vec3, restitution: f32, friction: f32) {
-    let vn = v.dot(n);
-    let tangential = *v - n * vn;
-    let normal_change = (1.0 + restitution) * (-vn).max(0.0);
-    let speed = tangential.length();
-    // In a position solver the contact has already stopped the normal motion: friction uses the
-    // normal speed the contact removed or, if none is left, a minimum of the tangential speed.
-    let kept = if speed > 0.0 { (1.0 - friction * normal_change.max(0.0) / speed).max(0.0) } else { 0.0 };
-    let vn_out = if vn < 0.0 { -restitution * vn } else { vn };
-    *v = tangential * kept + n * vn_out;
-}
-
 /// SPEC 2.3 contact response of one vertex: projection to the surface, restitution of the
 /// normal velocity, Coulomb friction on the tangential one (the friction impulse is at most
 /// `friction` times the normal impulse). Returns true when the vertex touched an obstacle.

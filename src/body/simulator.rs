@@ -364,7 +364,13 @@ impl Body {
     fn unstable(&self, what: String) -> Error {
         let h = self.settings.time_step as f64 / self.settings.substeps as f64;
         let h_max = self.stable_time_step();
-        let advice = if h_max.is_finite() {
+        let implicit = matches!(self.settings.integrator, Integrator::ImplicitEuler | Integrator::Xpbd);
+        let advice = if implicit {
+            format!(
+                "this step used h = {h:.3e} s; raise substeps or lower time_step (the explicit integrators would need \
+                 h below about {h_max:.3e} s)"
+            )
+        } else if h_max.is_finite() {
             let substeps = (self.settings.time_step as f64 / (0.9 * h_max)).ceil().max(1.0);
             format!(
                 "the largest stable time step is about {h_max:.3e} s (2/omega_max from K_s and the lightest vertex; \
@@ -507,7 +513,8 @@ impl Body {
                 (explicit::substep(&model, gas, x, v, h, self.settings.integrator == Integrator::SymplecticEuler, s), 0)
             }
             Scratch::Implicit(s) => {
-                implicit::substep(&model, gas, x, v, h, (10 * self.settings.iterations as usize).max(20), s)
+                let max_iterations = (10 * self.settings.iterations as usize).max(40);
+                implicit::substep(&model, gas, x, v, h, max_iterations, &self.pool, s)
             }
             Scratch::Xpbd(s) => (xpbd::substep(&model, gas, x, v, h, self.settings.iterations, &self.obstacles, s), 0),
         };
@@ -625,7 +632,7 @@ impl Body {
         if let Some(old) = self.gas.take() {
             let mut gas =
                 Gas::new(n, &self.triangles, &self.face_fragment, self.fragment_count, &topology.boundary_loops);
-            gas.inherit(&old.n_rt, old_face_fragment, &self.face_fragment, &self.nodes.x, &self.triangles);
+            gas.inherit(&old.n_rt, &old.volume, old_face_fragment, &self.face_fragment, &self.nodes.x, &self.triangles);
             self.gas = Some(gas);
         }
         self.generation += 1;

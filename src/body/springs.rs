@@ -10,15 +10,50 @@ pub(crate) struct Springs {
     pub ends: Vec<[u32; 2]>,
     /// Rest length L0, m.
     pub rest: Vec<f32>,
+    /// Springs around each vertex in CSR form: those of vertex i are
+    /// `adjacency[offsets[i]..offsets[i + 1]]` as (spring, other end), in spring order. Lets the
+    /// parallel loops gather per vertex in a fixed order instead of scattering.
+    pub offsets: Vec<u32>,
+    pub adjacency: Vec<(u32, u32)>,
 }
 
 impl Springs {
+    /// Builds the per-vertex adjacency for `vertex_count` vertices.
+    pub fn build_adjacency(&mut self, vertex_count: usize) {
+        let mut offsets = vec![0u32; vertex_count + 1];
+        for &[i, j] in &self.ends {
+            offsets[i as usize + 1] += 1;
+            offsets[j as usize + 1] += 1;
+        }
+        for v in 0..vertex_count {
+            offsets[v + 1] += offsets[v];
+        }
+        let mut cursor = offsets.clone();
+        let mut adjacency = vec![(0u32, 0u32); 2 * self.ends.len()];
+        for (k, &[i, j]) in self.ends.iter().enumerate() {
+            adjacency[cursor[i as usize] as usize] = (k as u32, j);
+            cursor[i as usize] += 1;
+            adjacency[cursor[j as usize] as usize] = (k as u32, i);
+            cursor[j as usize] += 1;
+        }
+        self.offsets = offsets;
+        self.adjacency = adjacency;
+    }
+
+    /// (spring, other end) pairs around vertex `i`.
+    pub fn around(&self, i: usize) -> &[(u32, u32)] {
+        &self.adjacency[self.offsets[i] as usize..self.offsets[i + 1] as usize]
+    }
+
     pub fn len(&self) -> usize {
         self.ends.len()
     }
 
     pub fn memory_bytes(&self) -> usize {
-        self.ends.capacity() * 8 + self.rest.capacity() * 4
+        self.ends.capacity() * 8
+            + self.rest.capacity() * 4
+            + self.offsets.capacity() * 4
+            + self.adjacency.capacity() * 8
     }
 }
 

@@ -103,5 +103,6 @@ pub(crate) fn build_springs(topology: &Topology, fracture: Option<&Fracture>, re
         springs.ends.push([a, b]);
         springs.rest.push((rest[b as usize] - rest[a as usize]).length());
     }
+    springs.build_adjacency(rest.len());
     springs
 }

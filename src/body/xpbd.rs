@@ -11,7 +11,7 @@ use glam::Vec3;
 
 use super::forces::{Model, external_forces};
 use super::gas::Gas;
-use super::obstacles::{Obstacle, project, respond};
+use super::obstacles::{Obstacle, project};
 
 /// Scratch of the XPBD integrator (allocated only when it is used).
 #[derive(Default)]
@@ -57,6 +57,7 @@ pub(crate) fn distance_delta_lambda(
 }
 
 /// One substep of length `h` with `iterations` Gauss-Seidel sweeps; returns the wind work, J.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn substep(
     model: &Model,
     mut gas: Option<&mut Gas>,
@@ -111,7 +112,11 @@ pub(crate) fn substep(
                     let vol = gas.volume[f].max(gas.v_min[f]).max(f64::MIN_POSITIVE);
                     let target = h2 * gas.n_rt[f] / vol;
                     let slope = if gas.volume[f] > gas.v_min[f] { h2 * gas.n_rt[f] / (vol * vol) } else { 0.0 };
-                    -(s.gas_lambda[f] - target) / (1.0 + slope * s.gas_norm[f])
+                    let delta = -(s.gas_lambda[f] - target) / (1.0 + slope * s.gas_norm[f]);
+                    // Trust region: one update changes the volume by at most a tenth (the
+                    // linearisation is only good that far; shreds near zero volume need it).
+                    let limit = 0.1 * vol / s.gas_norm[f].max(f64::MIN_POSITIVE);
+                    delta.clamp(-limit, limit)
                 })
                 .collect();
             for (f, d) in deltas.iter().enumerate() {
@@ -178,7 +183,6 @@ pub(crate) fn substep(
                     tangential *= (1.0 - friction * removed / speed).max(0.0);
                 }
                 v[i] = tangential + normal * bounce;
-                let _ = respond;
             }
         }
     }

@@ -82,7 +82,7 @@ pub struct SoftshellBodyDef {
     /// on it.
     pub threads: u32,
     /// XPBD Gauss-Seidel sweeps per substep; the implicit integrator allows 10 times as many
-    /// conjugate-gradient iterations (at least 20). In [1, 1000]. Default 10.
+    /// conjugate-gradient iterations (at least 40). In [1, 1000]. Default 10.
     pub iterations: u32,
     /// Set by `softshell_body_def_default`; do not touch.
     pub internal_cookie: u32,
@@ -404,7 +404,7 @@ pub unsafe extern "C" fn softshell_body_add_plane_obstacle(
         // SAFETY: as above.
         let normal = unsafe { arg_vec3(normal, "normal")? };
         let length = (normal[0] as f64).hypot(normal[1] as f64).hypot(normal[2] as f64);
-        if !(length > 1e-12) || !length.is_finite() {
+        if length.is_nan() || length <= 1e-12 || !length.is_finite() {
             return Err(Error::invalid_argument(format!(
                 "`normal` = ({}, {}, {}) must have a non-zero finite length",
                 normal[0], normal[1], normal[2]

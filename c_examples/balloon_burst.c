@@ -1,0 +1,155 @@
+/* balloon_burst: inflate a sphere until it cracks, print every topology change and write OBJ
+ * frames.
+ *   balloon_burst [frames_dir] [mesh.obj]     (defaults: balloon_frames, data/sphere.obj)
+ * The balloon (time step 1/30 s) starts at rest and swells until its springs stretch by almost the breaking strain;
+ * at step 12 a pin prick (one triangle cut out by hand with softshell_body_break_edge) makes a
+ * hole, the crack runs from there as each broken spring loads its neighbours, and the gas leaks
+ * out. Every 10th step
+ * and every step that changes the topology is written as frames_dir/frame_NNNN.obj.
+ * Exit status 0 on success, 1 on any error (the library's message is printed). */
+#define _POSIX_C_SOURCE 200809L
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "softshell.h"
+
+#define STEPS 30      /* at 1/30 s: the balloon settles in about 12 steps */
+#define PRICK_STEP 12
+
+static int fail(const char *what, SoftshellStatus status) {
+  fprintf(stderr, "%s failed: %s: %s\n", what, softshell_status_name(status), softshell_last_error());
+  return 1;
+}
+
+/* Buffers that grow when fracture adds vertices: re-queried after every topology change. */
+typedef struct Buffers {
+  float *positions;
+  size_t positions_cap;
+  uint32_t *triangles;
+  size_t triangles_cap;
+} Buffers;
+
+/* Copies positions and triangles, growing the buffers when the library says they are too small. */
+static SoftshellStatus fetch(const SoftshellBody *body, Buffers *b, size_t *n_floats, size_t *n_indices) {
+  SoftshellStatus s = softshell_body_copy_positions(body, b->positions, b->positions_cap, n_floats);
+  if (s == SOFTSHELL_STATUS_BUFFER_TOO_SMALL) {
+    float *grown = realloc(b->positions, *n_floats * sizeof *grown);
+    if (!grown) return SOFTSHELL_STATUS_INTERNAL;
+    b->positions = grown;
+    b->positions_cap = *n_floats;
+    s = softshell_body_copy_positions(body, b->positions, b->positions_cap, n_floats);
+  }
+  if (s != SOFTSHELL_STATUS_OK) return s;
+  s = softshell_body_copy_triangles(body, b->triangles, b->triangles_cap, n_indices);
+  if (s == SOFTSHELL_STATUS_BUFFER_TOO_SMALL) {
+    uint32_t *grown = realloc(b->triangles, *n_indices * sizeof *grown);
+    if (!grown) return SOFTSHELL_STATUS_INTERNAL;
+    b->triangles = grown;
+    b->triangles_cap = *n_indices;
+    s = softshell_body_copy_triangles(body, b->triangles, b->triangles_cap, n_indices);
+  }
+  return s;
+}
+
+static int write_obj(const char *dir, unsigned frame, const Buffers *b, size_t n_floats, size_t n_indices) {
+  char path[4096];
+  snprintf(path, sizeof path, "%s/frame_%04u.obj", dir, frame);
+  FILE *f = fopen(path, "w");
+  if (!f) {
+    fprintf(stderr, "cannot write %s: %s\n", path, strerror(errno));
+    return 1;
+  }
+  for (size_t i = 0; i + 2 < n_floats; i += 3)
+    fprintf(f, "v %.6g %.6g %.6g\n", (double)b->positions[i], (double)b->positions[i + 1], (double)b->positions[i + 2]);
+  for (size_t i = 0; i + 2 < n_indices; i += 3)
+    fprintf(f, "f %u %u %u\n", (unsigned)b->triangles[i] + 1, (unsigned)b->triangles[i + 1] + 1,
+            (unsigned)b->triangles[i + 2] + 1);
+  fclose(f);
+  return 0;
+}
+
+int main(int argc, char **argv) {
+  const char *dir = argc > 1 ? argv[1] : "balloon_frames";
+  const char *path = argc > 2 ? argv[2] : "data/sphere.obj";
+  if (mkdir(dir, 0777) != 0 && errno != EEXIST) {
+    fprintf(stderr, "cannot create %s: %s\n", dir, strerror(errno));
+    return 1;
+  }
+
+  SoftshellMesh *mesh = NULL;
+  SoftshellStatus status = softshell_mesh_load_obj(path, &mesh);
+  if (status != SOFTSHELL_STATUS_OK) return fail("softshell_mesh_load_obj", status);
+
+  SoftshellBodyDef def = softshell_body_def_default();
+  def.time_step = 1.0f / 30.0f;
+  def.iterations = 4; /* at most 40 conjugate-gradient iterations per step: plenty here */
+  def.total_mass = 1.0f;
+  def.spring_stiffness = 400.0f;  /* N/m per edge */
+  def.spring_damping = 1.0f;
+  def.gas_amount = 700.0f;        /* nRT, J: inflated, the springs stretch by up to 11.4 % */
+  def.break_strain = 0.125f;      /* springs stretched by 12.5 % crack */
+  def.leak_rate = 0.5f;           /* the gas escapes through the holes */
+  def.gravity[1] = 0.0f;
+
+  SoftshellBody *body = NULL;
+  status = softshell_body_new(mesh, &def, &body);
+  softshell_mesh_free(mesh); /* the body keeps its own copy */
+  if (status != SOFTSHELL_STATUS_OK) return fail("softshell_body_new", status);
+
+  Buffers buffers = {NULL, 0, NULL, 0};
+  size_t n_floats = 0, n_indices = 0;
+  uint64_t generation = softshell_body_topology_generation(body);
+  unsigned frame = 0;
+  int result = 0;
+  printf("%5s %8s %8s %9s %9s %10s\n", "step", "broken", "vertices", "triangles", "fragments", "pressure");
+  for (unsigned step = 0; step < STEPS && result == 0; ++step) {
+    if (step == PRICK_STEP) {
+      /* A pin prick: cut the three sides of the first triangle by hand. */
+      status = fetch(body, &buffers, &n_floats, &n_indices);
+      if (status != SOFTSHELL_STATUS_OK) {
+        result = fail("copying positions and triangles", status);
+        break;
+      }
+      uint32_t t[3] = {buffers.triangles[0], buffers.triangles[1], buffers.triangles[2]};
+      for (int k = 0; k < 3 && result == 0; ++k) {
+        status = softshell_body_break_edge(body, t[k], t[(k + 1) % 3]);
+        if (status != SOFTSHELL_STATUS_OK) result = fail("softshell_body_break_edge", status);
+      }
+      if (result != 0) break;
+      printf("%5u: pin prick, triangle (%u, %u, %u) cut out by hand\n", step, (unsigned)t[0], (unsigned)t[1],
+             (unsigned)t[2]);
+      generation = softshell_body_topology_generation(body);
+    }
+    SoftshellBodyStats stats;
+    status = softshell_body_step(body, &stats);
+    if (status != SOFTSHELL_STATUS_OK) {
+      result = fail("softshell_body_step", status);
+      break;
+    }
+    int changed = stats.topology_generation != generation;
+    if (changed) {
+      generation = stats.topology_generation;
+      printf("%5u %8llu %8zu %9zu %9zu %10.2f\n", step, (unsigned long long)stats.springs_broken,
+             stats.vertex_count, stats.triangle_count, stats.fragment_count, stats.pressure);
+    }
+    if (changed || step % 10 == 0) {
+      status = fetch(body, &buffers, &n_floats, &n_indices);
+      if (status != SOFTSHELL_STATUS_OK) {
+        result = fail("copying positions and triangles", status);
+        break;
+      }
+      result = write_obj(dir, frame++, &buffers, n_floats, n_indices);
+    }
+    if (step == STEPS - 1)
+      printf("final: volume %.4f m^3, pressure %.2f Pa, %zu fragments, %u frames in %s\n", stats.volume,
+             stats.pressure, stats.fragment_count, frame, dir);
+  }
+
+  free(buffers.positions);
+  free(buffers.triangles);
+  softshell_body_free(body);
+  return result;
+}

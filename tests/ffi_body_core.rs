@@ -1,0 +1,92 @@
+//! Core blocks (SPEC 2.4): a node whose net force exceeds `break_force` is cut out as a closed
+//! block that becomes a separate fragment, while the surface left behind stays closed.
+#![cfg(feature = "body")]
+
+mod body_util;
+
+use body_util::*;
+use softshell::ffi::SoftshellStatus;
+use softshell::ffi::body::*;
+
+fn hit(break_force: f32, speed: f32) -> (Body, Snapshot, Snapshot, SoftshellBodyStats) {
+    let (positions, triangles) = icosphere(2, 0.5);
+    let mut def = softshell_body_def_default();
+    def.gravity = [0.0; 3];
+    def.gas_amount = 10.0;
+    def.spring_stiffness = 1000.0;
+    def.break_force = break_force;
+    let body = body(&positions, &triangles, &def);
+    let start = snapshot(&body);
+    // A blow that rips vertex 20 outwards.
+    let p = start.position(20);
+    let m = start.masses[20];
+    let impulse = [speed * m * p[0] / 0.5, speed * m * p[1] / 0.5, speed * m * p[2] / 0.5];
+    // SAFETY: live body, float[3].
+    assert_eq!(unsafe { softshell_body_apply_impulse(body.0, 20, impulse.as_ptr()) }, SoftshellStatus::Ok);
+    let before = snapshot(&body);
+    let stats = step(&body);
+    (body, start, before, stats)
+}
+
+#[test]
+fn a_blow_releases_a_core_block_that_becomes_a_separate_closed_fragment() {
+    let (body, start, before, stats) = hit(20.0, 30.0);
+    println!(
+        "cores released {}, vertices {} -> {}, triangles {} -> {}, fragments {}",
+        stats.cores_released,
+        before.vertex_count(),
+        stats.vertex_count,
+        before.triangle_count(),
+        stats.triangle_count,
+        stats.fragment_count
+    );
+    assert!(stats.cores_released >= 1);
+    assert_eq!(stats.fragment_count as u64, 1 + stats.cores_released);
+    assert_eq!(stats.springs_broken, 0);
+    old_sizes_are_refused(&body, &before);
+    let s = snapshot(&body);
+    check_surface(&s, start.vertex_count());
+    // Every piece is closed and outward: the blocks and the surface they left.
+    let report = Mesh::new(&s.positions, &s.triangles).report();
+    assert!(report.is_closed, "a core block or the surface left behind is open");
+    assert!(report.is_consistently_oriented);
+    assert!(report.volume > 0.0);
+    for piece in 0..s.fragment_count as u32 {
+        let triangles: Vec<u32> = s
+            .triangles
+            .chunks_exact(3)
+            .zip(&s.fragments)
+            .filter(|(_, f)| **f == piece)
+            .flat_map(|(t, _)| t.iter().copied())
+            .collect();
+        let r = Mesh::new(&s.positions, &triangles).report();
+        assert!(r.is_closed && r.volume > 0.0, "fragment {piece}: closed {} volume {}", r.is_closed, r.volume);
+    }
+    // The struck vertex kept its index and went with its block.
+    assert_eq!(s.origins[20], 20);
+    let block = s.fragments[s.triangles.chunks_exact(3).position(|t| t.contains(&20)).unwrap()];
+    let main = *s.fragments.iter().max_by_key(|&&f| s.fragments.iter().filter(|&&g| g == f).count()).unwrap();
+    assert_ne!(block, main, "vertex 20 is in a core block");
+    // Mass and momentum (the blow's) are conserved through the cut.
+    assert!((s.total_mass() - before.total_mass()).abs() < 1e-6 * before.total_mass());
+    let (p0, p1) = (before.momentum(), s.momentum());
+    let scale = p0.iter().map(|c| c.abs()).sum::<f64>();
+    for k in 0..3 {
+        assert!((p1[k] - p0[k]).abs() < 2e-3 * scale, "momentum {p0:?} -> {p1:?}");
+    }
+    // Vertex indices are stable: the first vertices are the survivors, never renumbered.
+    assert!(s.vertex_count() > before.vertex_count());
+    // The simulation goes on with the pieces.
+    for _ in 0..30 {
+        let st = step(&body);
+        assert!(st.kinetic_energy.is_finite());
+    }
+}
+
+#[test]
+fn without_a_blow_or_with_a_high_limit_nothing_breaks() {
+    let (_, _, _, stats) = hit(1e9, 30.0);
+    assert_eq!((stats.cores_released, stats.topology_generation, stats.fragment_count), (0, 0, 1));
+    let (_, _, _, stats) = hit(20.0, 0.0);
+    assert_eq!(stats.cores_released, 0, "the gas alone must not release cores at this limit");
+}

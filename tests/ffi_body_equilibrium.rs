@@ -1,0 +1,56 @@
+//! The settled volume of a gas-filled ball matches the analytic equilibrium (SPEC 4).
+//!
+//! Scaling the rest sphere by s stretches every spring by (s - 1) L0 and multiplies the volume by
+//! s³, so `E(s) = K_s (s-1)² Σ L0² / 2 - nRT ln(s³ V0)` is stationary where
+//! `K_s s (s - 1) Σ L0² = 3 nRT`: given K_s and nRT, V/V0 = s³.
+#![cfg(feature = "body")]
+
+mod body_util;
+
+use body_util::*;
+use softshell::ffi::body::*;
+
+fn sum_rest_squared(p: &[f32], t: &[u32]) -> f64 {
+    let mut seen = std::collections::HashSet::new();
+    let mut sum = 0.0;
+    for tri in t.chunks_exact(3) {
+        for k in 0..3 {
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
+            if seen.insert((a.min(b), a.max(b))) {
+                sum += (0..3).map(|c| ((p[3 * a as usize + c] - p[3 * b as usize + c]) as f64).powi(2)).sum::<f64>();
+            }
+        }
+    }
+    sum
+}
+
+#[test]
+fn settled_volume_matches_the_analytic_equilibrium() {
+    let (p, t) = icosphere(3, 1.0);
+    let v0 = Mesh::new(&p, &t).report().volume;
+    let sum_l2 = sum_rest_squared(&p, &t);
+    for (ks, n_rt) in [(2000.0f64, 300.0f64), (500.0, 300.0), (5000.0, 100.0)] {
+        // Solve K s (s-1) Σ L0² = 3 nRT for s > 1.
+        let c = 3.0 * n_rt / (ks * sum_l2);
+        let s = (1.0 + (1.0 + 4.0 * c).sqrt()) / 2.0;
+        let analytic = s.powi(3);
+        let mut def = softshell_body_def_default();
+        def.gravity = [0.0; 3];
+        def.total_mass = 1.0;
+        def.spring_stiffness = ks as f32;
+        def.spring_damping = 1.0;
+        def.gas_amount = n_rt as f32;
+        let body = body(&p, &t, &def);
+        let mut last = step(&body);
+        for _ in 0..300 {
+            last = step(&body);
+        }
+        let ratio = last.volume / v0;
+        println!(
+            "K_s {ks}, nRT {n_rt}: V/V0 {ratio:.4}, analytic {analytic:.4}, error {:+.2}%",
+            (ratio / analytic - 1.0) * 100.0
+        );
+        assert!((ratio / analytic - 1.0).abs() < 0.02, "V/V0 {ratio} vs analytic {analytic}");
+        assert!(last.kinetic_energy < 1e-6, "not settled: {} J", last.kinetic_energy);
+    }
+}

@@ -1,0 +1,266 @@
+//! Fracture through the C ABI (SPEC 2.4): cracks from over-strained springs, a storm where half
+//! the springs break in one step, cuts by hand, gas leaking through the holes. After every
+//! topology change: buffers re-queried (the old sizes refused, never overrun), faces valid,
+//! manifold and oriented, one fan per vertex, mass and momentum conserved, new vertices placed
+//! exactly where they were split from, survivors never renumbered.
+#![cfg(feature = "body")]
+
+mod body_util;
+
+use body_util::*;
+use softshell::ffi::SoftshellStatus;
+use softshell::ffi::body::*;
+
+/// Every vertex added since `old_count` sits exactly where a vertex of the same origin is, with
+/// the same velocity (a crack copies x and v).
+fn new_vertices_coincide(s: &Snapshot, old_count: usize) {
+    for i in old_count..s.vertex_count() {
+        let found = (0..s.vertex_count()).any(|j| {
+            j != i
+                && s.origins[j] == s.origins[i]
+                && s.position(j) == s.position(i)
+                && s.velocities[3 * j..3 * j + 3] == s.velocities[3 * i..3 * i + 3]
+        });
+        assert!(found, "new vertex {i} does not coincide with a vertex of origin {}", s.origins[i]);
+    }
+}
+
+fn conserved(reference_mass: f64, reference_momentum: [f64; 3], s: &Snapshot, what: &str) {
+    assert!(
+        (s.total_mass() - reference_mass).abs() <= 1e-5 * reference_mass,
+        "{what}: mass {} -> {}",
+        reference_mass,
+        s.total_mass()
+    );
+    let scale: f64 = s
+        .masses
+        .iter()
+        .enumerate()
+        .map(|(i, &m)| {
+            let v = &s.velocities[3 * i..3 * i + 3];
+            m as f64 * ((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) as f64).sqrt()
+        })
+        .sum::<f64>()
+        + 1e-9;
+    let p = s.momentum();
+    for k in 0..3 {
+        assert!(
+            (p[k] - reference_momentum[k]).abs() <= 2e-3 * scale,
+            "{what}: momentum {reference_momentum:?} -> {p:?} (scale {scale})"
+        );
+    }
+}
+
+#[test]
+fn over_inflated_ball_cracks_and_deflates() {
+    let (positions, triangles) = icosphere(3, 1.0);
+    let mut def = softshell_body_def_default();
+    def.gravity = [0.0; 3];
+    def.spring_stiffness = 400.0;
+    def.spring_damping = 2.0;
+    def.gas_amount = 700.0; // the springs would hold it at about 12 % strain: the longest break
+    def.break_strain = 0.12;
+    def.leak_rate = 0.5;
+    let body = body(&positions, &triangles, &def);
+    let start = snapshot(&body);
+    let (mass, momentum) = (start.total_mass(), start.momentum());
+    let first = step(&body);
+    let mut previous = snapshot(&body);
+    let gas0 = first.pressure * first.volume;
+    let mut changes = u64::from(first.springs_broken > 0);
+    let mut broken = first.springs_broken;
+    let mut last = first;
+    for k in 0..300 {
+        let stats = step(&body);
+        if stats.topology_generation != previous.generation {
+            changes += 1;
+            broken += stats.springs_broken;
+            println!(
+                "step {k}: {} springs broken, {} vertices, {} triangles, {} fragments, pressure {:.1} Pa",
+                stats.springs_broken, stats.vertex_count, stats.triangle_count, stats.fragment_count, stats.pressure
+            );
+            old_sizes_are_refused(&body, &previous);
+            let s = snapshot(&body);
+            assert_eq!(s.vertex_count(), stats.vertex_count);
+            assert_eq!(s.triangle_count(), stats.triangle_count);
+            check_surface(&s, start.vertex_count());
+            new_vertices_coincide(&s, previous.vertex_count());
+            conserved(mass, momentum, &s, &format!("step {k}"));
+            // Survivors keep their triangles' winding: the triangle count never shrinks.
+            assert!(s.triangle_count() >= previous.triangle_count());
+            previous = s;
+        }
+        last = stats;
+    }
+    let gas = last.pressure * last.volume;
+    println!("{changes} topology changes, {broken} springs broken; nRT {gas0:.1} -> {gas:.1} J");
+    assert!(broken > 0 && changes > 0, "the over-inflated ball must crack");
+    assert!(last.vertex_count > start.vertex_count(), "the cracks must open (vertices split)");
+    assert!(gas < 0.2 * gas0, "the burst ball must deflate: nRT {gas0} -> {gas}");
+    assert!(last.energy_drift.is_finite());
+}
+
+#[test]
+fn storm_half_the_springs_break_in_one_step() {
+    let (positions, triangles) = icosphere(3, 0.5);
+    let mut def = softshell_body_def_default();
+    def.gravity = [0.0; 3];
+    def.spring_stiffness = 50.0;
+    def.spring_damping = 0.0;
+    def.gas_amount = 20.0;
+    def.break_strain = 0.1;
+    def.leak_rate = 1.0;
+    let body = body(&positions, &triangles, &def);
+    let start = snapshot(&body);
+    // Throw the x > 0 half outwards at 6 m/s: in one step (h = 1/60) its springs stretch ~20 %.
+    for i in 0..start.vertex_count() {
+        let p = start.position(i);
+        if p[0] > 0.0 {
+            let m = start.masses[i];
+            let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            let impulse = [6.0 * m * p[0] / r, 6.0 * m * p[1] / r, 6.0 * m * p[2] / r];
+            // SAFETY: live body, float[3].
+            assert_eq!(
+                unsafe { softshell_body_apply_impulse(body.0, i as u32, impulse.as_ptr()) },
+                SoftshellStatus::Ok
+            );
+        }
+    }
+    let before = snapshot(&body);
+    let (mass, momentum) = (before.total_mass(), before.momentum());
+    let stats = step(&body);
+    let springs = 3 * start.triangle_count() / 2;
+    println!(
+        "storm: {} of {springs} springs broke in one step; {} vertices, {} fragments",
+        stats.springs_broken, stats.vertex_count, stats.fragment_count
+    );
+    assert!(stats.springs_broken as f64 >= 0.35 * springs as f64, "{} broke", stats.springs_broken);
+    assert!(stats.springs_broken as f64 <= 0.8 * springs as f64);
+    assert_eq!(stats.topology_generation, 1);
+    old_sizes_are_refused(&body, &before);
+    let s = snapshot(&body);
+    check_surface(&s, start.vertex_count());
+    new_vertices_coincide(&s, before.vertex_count());
+    conserved(mass, momentum, &s, "storm");
+    assert!(s.fragment_count > 10, "the storm shreds the thrown half ({} fragments)", s.fragment_count);
+    // The shreds go on: a few more steps stay finite and keep the invariants.
+    let mut previous = s;
+    for _ in 0..30 {
+        let stats = step(&body);
+        if stats.topology_generation != previous.generation {
+            old_sizes_are_refused(&body, &previous);
+            previous = snapshot(&body);
+            check_surface(&previous, start.vertex_count());
+            conserved(mass, momentum, &previous, "after the storm");
+        }
+    }
+    assert!(previous.positions.iter().all(|p| p.is_finite()));
+}
+
+/// The ring of neighbours of vertex `v`, in order around it (from the triangles).
+fn ring(s: &Snapshot, v: u32) -> Vec<u32> {
+    let mut next = std::collections::HashMap::new();
+    for t in s.triangles.chunks_exact(3) {
+        if let Some(c) = t.iter().position(|&x| x == v) {
+            next.insert(t[(c + 1) % 3], t[(c + 2) % 3]);
+        }
+    }
+    let first = *next.keys().min().unwrap();
+    let mut ring = vec![first];
+    let mut current = next[&first];
+    while current != first {
+        ring.push(current);
+        current = next[&current];
+    }
+    ring
+}
+
+#[test]
+fn cuts_by_hand_keep_every_invariant_and_free_a_piece() {
+    let (positions, triangles) = icosphere(2, 0.5);
+    let mut def = softshell_body_def_default();
+    def.gravity = [0.0; 3];
+    def.gas_amount = 10.0;
+    def.leak_rate = 10.0;
+    let body = body(&positions, &triangles, &def);
+    // Give it some motion so that momentum is a real check.
+    for v in [0u32, 7, 30] {
+        // SAFETY: live body, float[3].
+        unsafe { softshell_body_apply_impulse(body.0, v, [0.01f32, -0.02, 0.005].as_ptr()) };
+    }
+    for _ in 0..5 {
+        step(&body);
+    }
+    let start = snapshot(&body);
+    let (mass, momentum) = (start.total_mass(), start.momentum());
+    // Cut the loop of edges around the ring of vertex 20: its fan becomes a separate piece.
+    let around = ring(&start, 20);
+    let mut previous = start.clone();
+    for k in 0..around.len() {
+        let (a, b) = (around[k], around[(k + 1) % around.len()]);
+        // SAFETY: live body.
+        let status = unsafe { softshell_body_break_edge(body.0, a, b) };
+        assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+        // SAFETY: as above. Breaking it again is refused: it is no spring any more.
+        assert_eq!(unsafe { softshell_body_break_edge(body.0, a, b) }, SoftshellStatus::InvalidArgument);
+        let s = snapshot(&body);
+        assert_eq!(s.generation, previous.generation + 1);
+        old_sizes_are_refused(&body, &previous);
+        check_surface(&s, start.vertex_count());
+        check_split(&previous, &s, 1e-5);
+        conserved(mass, momentum, &s, &format!("cut {k}"));
+        previous = s;
+    }
+    assert_eq!(previous.fragment_count, 2, "the ring cut frees the fan of vertex 20");
+    assert!(previous.vertex_count() > start.vertex_count());
+    // Vertex 20 kept its index and its origin; the cut piece is its fan (6 or 5 triangles).
+    assert_eq!(previous.origins[20], 20);
+    let piece = previous.fragments[previous.triangles.chunks_exact(3).position(|t| t.contains(&20)).unwrap()];
+    let piece_faces = previous.fragments.iter().filter(|&&f| f == piece).count();
+    assert_eq!(piece_faces, around.len());
+    // The holed ball leaks: its gas falls step after step.
+    let first = step(&body);
+    let mut last = first;
+    for _ in 0..120 {
+        last = step(&body);
+    }
+    println!("leak: nRT {:.3} -> {:.3} J", first.pressure * first.volume, last.pressure * last.volume);
+    assert!(last.pressure * last.volume < 0.5 * first.pressure * first.volume);
+}
+
+#[test]
+fn each_closed_fragment_keeps_its_own_gas() {
+    // Two separate balls in one mesh: cracking one leaves the other's pressure alone.
+    let (p, t) = icosphere(2, 0.5);
+    let mut positions = p.clone();
+    positions.extend(p.chunks_exact(3).flat_map(|c| [c[0] + 3.0, c[1], c[2]]));
+    let n = (p.len() / 3) as u32;
+    let mut triangles = t.clone();
+    triangles.extend(t.iter().map(|&v| v + n));
+    let mut def = softshell_body_def_default();
+    def.gravity = [0.0; 3];
+    def.gas_amount = 20.0;
+    def.leak_rate = 5.0;
+    let body = body(&positions, &triangles, &def);
+    let s = snapshot(&body);
+    assert_eq!(s.fragment_count, 2);
+    let around = ring(&s, 3);
+    for k in 0..around.len() {
+        // SAFETY: live body.
+        assert_eq!(
+            unsafe { softshell_body_break_edge(body.0, around[k], around[(k + 1) % around.len()]) },
+            SoftshellStatus::Ok
+        );
+    }
+    let first = step(&body);
+    let mut last = first;
+    for _ in 0..200 {
+        last = step(&body);
+    }
+    let s = snapshot(&body);
+    assert_eq!(s.fragment_count, 3);
+    // The intact second ball holds about half of the initial gas: nRT_total stays above 40 %.
+    let (g0, g1) = (first.pressure * first.volume, last.pressure * last.volume);
+    println!("two balls: nRT {g0:.2} -> {g1:.2} J");
+    assert!(g1 < 0.8 * g0 && g1 > 0.4 * g0, "{g0} -> {g1}");
+}
