@@ -1,0 +1,103 @@
+//! The extreme cases of SPEC 4 through the C ABI, for every simulator they apply to: each step
+//! ends finite and sane, or fails cleanly with `UNSTABLE` (state rolled back byte for byte), or
+//! the input is refused with `INVALID_MESH` / `INVALID_ARGUMENT` (zero-area triangles with their
+//! index) and nothing changes. The cases live in `report_util/cases.rs`, shared with the
+//! `error_vs_time` bench, which prints the same table into report/error_vs_time.md.
+//!
+//! Not covered (too slow for a test on 2 cores): meshes of 1M triangles.
+#![cfg(all(feature = "shell", feature = "body", feature = "lattice"))]
+
+mod report_util;
+
+use report_util::cases::*;
+
+fn check(rows: Vec<Row>) -> Vec<Row> {
+    for r in &rows {
+        println!(
+            "{:8} | {:48} | {:16} | {:22} | {}",
+            r.simulator,
+            r.case,
+            r.setting,
+            r.outcome.label(),
+            r.outcome.detail()
+        );
+    }
+    let broken: Vec<String> = rows
+        .iter()
+        .filter(|r| matches!(r.outcome, Outcome::Broken(_)) && !is_known_bug(r))
+        .map(|r| format!("{} / {} / {}: {}", r.simulator, r.case, r.setting, r.outcome.detail()))
+        .collect();
+    assert!(broken.is_empty(), "contract broken:\n{}", broken.join("\n"));
+    rows
+}
+
+fn outcome<'a>(rows: &'a [Row], case: &str, setting: &str) -> &'a Outcome {
+    &rows.iter().find(|r| r.case.starts_with(case) && r.setting == setting).unwrap().outcome
+}
+
+#[test]
+fn shell_extremes_are_finite_or_fail_cleanly() {
+    let rows = check(shell_rows());
+    for (_, setting) in SHELL_SOLVERS {
+        assert!(matches!(outcome(&rows, "zero-area", setting), Outcome::Rejected(_)));
+        assert!(matches!(outcome(&rows, "NaN/inf", setting), Outcome::Rejected(_)));
+        // Stiff membranes are what XPBD is for.
+        assert!(matches!(outcome(&rows, "Young's modulus 1e9", setting), Outcome::Stable(_)), "{setting}");
+    }
+}
+
+#[test]
+fn body_extremes_are_finite_or_fail_cleanly() {
+    let rows = check(body_rows());
+    for r in rows.iter().filter(|r| is_known_bug(r) && matches!(r.outcome, Outcome::Broken(_))) {
+        println!("KNOWN BODY BUG: {} / {}: {}", r.case, r.setting, r.outcome.detail());
+    }
+    for (_, setting) in BODY_INTEGRATORS {
+        assert!(matches!(outcome(&rows, "zero-area triangle (with gas)", setting), Outcome::Rejected(_)));
+        assert!(matches!(outcome(&rows, "NaN/inf", setting), Outcome::Rejected(_)));
+    }
+    // The stable integrators survive stiff springs at h = 1/60 (SPEC 2.2).
+    assert!(matches!(outcome(&rows, "K_s 1e7", "implicit Euler"), Outcome::Stable(_)));
+}
+
+#[test]
+fn lattice_extremes_are_finite_or_fail_cleanly() {
+    let rows = check(lattice_rows());
+    for (_, setting) in LATTICE_SETTINGS {
+        assert!(matches!(outcome(&rows, "NaN/inf", setting), Outcome::Rejected(_)));
+        assert!(matches!(outcome(&rows, "h = 0.1", setting), Outcome::Stable(_)), "{setting}");
+    }
+}
+
+/// Reproducer of a simulator bug (see report/error_vs_time.md): symplectic Euler on a gas sphere
+/// with K_s = 1e9 N/m at h = 1/60 blows up to positions of 1e5 m and an energy of 1e20 J within
+/// two steps, and `softshell_body_step` still returns OK (SPEC 2.2 asks for UNSTABLE with the state
+/// rolled back). Un-ignore once the body's divergence check catches it.
+#[test]
+#[ignore = "known body simulator bug: a finite blow-up is not reported as UNSTABLE"]
+fn body_blow_up_is_reported_unstable() {
+    use report_util::*;
+    use softshell::ffi::body::*;
+    let (p, t) = unit_obj("sphere.obj", 1.0);
+    let def = softshell::ffi::SoftshellBodyDef {
+        integrator: SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER,
+        gas_amount: 1.0,
+        gravity: [0.0; 3],
+        spring_stiffness: 1e9,
+        ..softshell_body_def_default()
+    };
+    let body = Body::new(&p, &t, &def).unwrap();
+    for _ in 0..5 {
+        match body.step() {
+            Ok(_) => assert!(
+                max_abs(&body.positions()) < 100.0,
+                "blew up to {} m and returned OK",
+                max_abs(&body.positions())
+            ),
+            Err((status, _)) => {
+                assert_eq!(status, softshell::ffi::SoftshellStatus::Unstable);
+                return;
+            }
+        }
+    }
+}
