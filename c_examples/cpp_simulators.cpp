@@ -3,6 +3,7 @@
 // ground and cut open by hand (buffers re-read after each topology change), a pinned lattice
 // sheet poked in the middle, and one query of each CCD kind.
 //   cpp_simulators [file.obj]     (default data/sphere.obj; any closed, outward mesh)
+// Writes c_examples/build/cpp_shell.ply, cpp_body.ply and cpp_sheet.obj (one frame each).
 // Short on purpose: it runs under valgrind in CI.
 #include <cmath>
 #include <cstdio>
@@ -41,6 +42,8 @@ void shell_contraction(const softshell::Mesh &mesh) {
 
   SoftshellShellStats stats{};
   for (int i = 0; i < 150 && !stats.finished; ++i) stats = shell.step();
+  // A frame for MeshLab / Blender / ParaView: curvature, energy and pressure force per vertex.
+  shell.save_ply("c_examples/build/cpp_shell.ply", SOFTSHELL_SHELL_PLY_MEAN_CURVATURE);
   std::vector<float> mean = shell.vertex_curvature(SOFTSHELL_CURVATURE_MEAN);
   std::vector<float> energy = shell.face_energy();
   double total = 0.0;
@@ -74,6 +77,7 @@ void body_steps(const softshell::Mesh &mesh) {
     positions.resize(3 * body.vertex_count());  // re-sized every frame: fracture appends vertices
     body.copy_positions(positions);
   }
+  body.save_ply("c_examples/build/cpp_body.ply", SOFTSHELL_BODY_PLY_FRAGMENT);
   float lowest = positions[1];
   for (std::size_t i = 1; i < positions.size(); i += 3) lowest = std::fmin(lowest, positions[i]);
   std::printf("body: lowest point y = %.3f (ground at %.3f), %zu bytes\n", lowest, def.ground_height,
@@ -97,6 +101,7 @@ void lattice_poke() {
     stats = sheet.step();
   }
   std::vector<float> positions = sheet.positions();
+  sheet.save_obj("c_examples/build/cpp_sheet.obj");
   std::printf("lattice: %zu particles, %zu triangles, middle at y = %.4f, mean goal distance %.2e m\n",
               sheet.particle_count(), sheet.triangle_count(), positions[3 * middle + 1], stats.goal_distance);
 }

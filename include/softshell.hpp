@@ -239,7 +239,13 @@ class Shell {
     return detail::copy_all<float>(
         [&](float *o, std::size_t c, std::size_t *n) { return softshell_shell_copy_vertex_curvature(get(), kind, o, c, n); });
   }
-  /*SHELL_OUTPUT*/
+  /// PLY with mean_curvature, gaussian_curvature, energy and pressure_force per vertex, coloured
+  /// by `colour_by` (SOFTSHELL_SHELL_PLY_MEAN_CURVATURE, _GAUSSIAN_CURVATURE, _ENERGY, _PRESSURE_FORCE).
+  void save_ply(const std::string &path, std::uint32_t colour_by = SOFTSHELL_SHELL_PLY_MEAN_CURVATURE) const {
+    check(softshell_shell_save_ply(get(), path.c_str(), colour_by));
+  }
+  /// One OBJ frame of the current shape.
+  void save_obj(const std::string &path) const { check(softshell_shell_save_obj(get(), path.c_str())); }
 
   SoftshellShell *get() const noexcept { return handle_.get(); }
 
@@ -321,7 +327,13 @@ class Body {
     topology.generation = generation;
     return true;
   }
-  /*BODY_OUTPUT*/
+  /// PLY with speed, fragment_shade, mean_curvature and fragment per vertex, coloured by
+  /// `colour_by` (SOFTSHELL_BODY_PLY_SPEED, _FRAGMENT, _MEAN_CURVATURE).
+  void save_ply(const std::string &path, std::uint32_t colour_by = SOFTSHELL_BODY_PLY_SPEED) const {
+    check(softshell_body_save_ply(get(), path.c_str(), colour_by));
+  }
+  /// One OBJ frame of every piece.
+  void save_obj(const std::string &path) const { check(softshell_body_save_obj(get(), path.c_str())); }
 
   SoftshellBody *get() const noexcept { return handle_.get(); }
 
@@ -377,7 +389,13 @@ class Lattice {
   std::vector<std::uint32_t> triangles() const {
     return detail::copy_all<std::uint32_t>(softshell_lattice_copy_triangles, get());
   }
-  /*LATTICE_OUTPUT*/
+  /// PLY with height, speed and goal_distance per particle, coloured by `colour_by`
+  /// (SOFTSHELL_LATTICE_PLY_HEIGHT, _SPEED, _GOAL_DISTANCE).
+  void save_ply(const std::string &path, std::uint32_t colour_by = SOFTSHELL_LATTICE_PLY_HEIGHT) const {
+    check(softshell_lattice_save_ply(get(), path.c_str(), colour_by));
+  }
+  /// One OBJ frame of the sheet.
+  void save_obj(const std::string &path) const { check(softshell_lattice_save_obj(get(), path.c_str())); }
 
   SoftshellLattice *get() const noexcept { return handle_.get(); }
 
