@@ -92,6 +92,41 @@
 // `SoftshellAnisotropyDef.energy`: square-root fibre energy `mu/2 (sqrt(I5) - L)^2`.
 #define SOFTSHELL_ANISOTROPY_SQRT 2
 
+// `softshell_shell_save_ply` colour: mean curvature H, 1/m (blue concave, red convex).
+#define SOFTSHELL_SHELL_PLY_MEAN_CURVATURE 0
+
+// `softshell_shell_save_ply` colour: Gaussian curvature K, 1/m^2.
+#define SOFTSHELL_SHELL_PLY_GAUSSIAN_CURVATURE 1
+
+// `softshell_shell_save_ply` colour: membrane energy per vertex, J (a third of each adjacent
+// face's energy).
+#define SOFTSHELL_SHELL_PLY_ENERGY 2
+
+// `softshell_shell_save_ply` colour: magnitude of the pressure force on each vertex, N
+// (`|P/3 sum A_j n_j|` over the adjacent faces, SPEC 1.2).
+#define SOFTSHELL_SHELL_PLY_PRESSURE_FORCE 3
+
+// `softshell_body_save_ply` colour: speed of each vertex, m/s.
+#define SOFTSHELL_BODY_PLY_SPEED 0
+
+// `softshell_body_save_ply` colour: the fragment (connected piece) of each vertex, coloured so
+// that neighbouring fragment numbers get different colours.
+#define SOFTSHELL_BODY_PLY_FRAGMENT 1
+
+// `softshell_body_save_ply` colour: mean curvature H of the current surface, 1/m.
+#define SOFTSHELL_BODY_PLY_MEAN_CURVATURE 2
+
+// `softshell_lattice_save_ply` colour: height y of each particle, m (the displacement from the
+// rest plane y = 0).
+#define SOFTSHELL_LATTICE_PLY_HEIGHT 0
+
+// `softshell_lattice_save_ply` colour: speed of each particle, m/s.
+#define SOFTSHELL_LATTICE_PLY_SPEED 1
+
+// `softshell_lattice_save_ply` colour: distance from each particle to its shape-matching goal
+// |g - x|, m (how strained the sheet is there).
+#define SOFTSHELL_LATTICE_PLY_GOAL_DISTANCE 2
+
 // Result of every fallible call. Values are explicit and append-only: they are never renumbered.
 enum SoftshellStatus
 #if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
@@ -1170,6 +1205,91 @@ SoftshellStatus softshell_shell_copy_vertex_curvature(const struct SoftshellShel
 // # Safety
 // `shell` must be NULL or a live shell.
 size_t softshell_shell_memory_bytes(const struct SoftshellShell *shell);
+
+// Writes the shell's current shape as an ASCII PLY file with four float properties per
+// vertex: `mean_curvature` (1/m), `gaussian_curvature` (1/m^2), `energy` (membrane energy, J: a
+// third of each adjacent triangle's, so the vertex values sum to the total) and
+// `pressure_force` (N, the magnitude of the pressure force of SPEC 1.2), and vertex colours
+// from the one selected by `colour_by` (`SOFTSHELL_SHELL_PLY_MEAN_CURVATURE`,
+// `_GAUSSIAN_CURVATURE`, `_ENERGY` or `_PRESSURE_FORCE`): blue-white-red for signed values,
+// dark blue to yellow otherwise, scaled to the 2nd..98th percentiles. These are the pictures of
+// the paper's Fig. 8 and 10. Overwrites an existing file.
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL shell or path,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+// file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` feature. The shell
+// is not changed.
+//
+// # Safety
+// `shell` must be NULL or a live shell; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_shell_save_ply(const struct SoftshellShell *shell,
+                                         const char *path,
+                                         uint32_t colour_by);
+
+// Writes the shell's current shape as a Wavefront OBJ file (1-based `f a b c` lines, the
+// mesh's triangles): one file per frame makes a sequence that Blender and MeshLab import.
+// Overwrites an existing file. Returns `SOFTSHELL_STATUS_IO` when the file cannot be written,
+// `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` or `obj` feature.
+//
+// # Safety
+// `shell` must be NULL or a live shell; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_shell_save_obj(const struct SoftshellShell *shell, const char *path);
+
+// Writes the body's current surface (after fracture: every piece, split vertices included) as
+// an ASCII PLY file with four float properties per vertex, in this order: `speed` (m/s),
+// `fragment_shade` (a value in [0, 1) that differs between neighbouring fragment numbers, for
+// colours), `mean_curvature` (1/m) and `fragment` (the connected piece, as
+// `softshell_body_copy_fragment_ids` numbers them; -1 for a vertex no triangle uses), and
+// vertex colours from the one
+// selected by `colour_by` (`SOFTSHELL_BODY_PLY_SPEED`, `_FRAGMENT` or `_MEAN_CURVATURE`).
+// Overwrites an existing file.
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL body or path,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+// file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `body` feature. The body is
+// not changed.
+//
+// # Safety
+// `body` must be NULL or a live body; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_body_save_ply(const struct SoftshellBody *body,
+                                        const char *path,
+                                        uint32_t colour_by);
+
+// Writes the body's current surface as a Wavefront OBJ file (every piece; vertex k is vertex k
+// of `softshell_body_copy_positions`). Overwrites an existing file. Returns
+// `SOFTSHELL_STATUS_IO` when the file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without
+// the `body` or `obj` feature.
+//
+// # Safety
+// `body` must be NULL or a live body; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_body_save_obj(const struct SoftshellBody *body, const char *path);
+
+// Writes the lattice's current sheet (its triangulated grid) as an ASCII PLY file with three
+// float properties per particle: `height` (y, m: the displacement from the rest plane),
+// `speed` (m/s) and `goal_distance` (|g - x|, m: where the sheet is strained), and vertex
+// colours from the one selected by `colour_by` (`SOFTSHELL_LATTICE_PLY_HEIGHT`, `_SPEED` or
+// `_GOAL_DISTANCE`). Computing the goals costs about one step. Overwrites an existing file.
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL lattice or path,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+// file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `lattice` feature. The
+// lattice is not changed.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_lattice_save_ply(const struct SoftshellLattice *lattice,
+                                           const char *path,
+                                           uint32_t colour_by);
+
+// Writes the lattice's current sheet (its triangulated grid, as
+// `softshell_lattice_copy_triangles`) as a Wavefront OBJ file. Overwrites an existing file.
+// Returns `SOFTSHELL_STATUS_IO` when the file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED`
+// without the `lattice` or `obj` feature.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_lattice_save_obj(const struct SoftshellLattice *lattice,
+                                           const char *path);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -18,3 +18,4 @@ pub use lattice::{SoftshellLattice, SoftshellLatticeDef, SoftshellLatticeStats};
 pub use mesh::{SoftshellMesh, SoftshellMeshReport};
 pub mod shell;
 pub use shell::{SoftshellAnisotropyDef, SoftshellShell, SoftshellShellDef, SoftshellShellStats};
+pub mod output;

@@ -188,7 +188,7 @@ pub struct SoftshellShellStats {
 /// once; different shells may be stepped concurrently. Each shell owns its worker threads.
 pub struct SoftshellShell {
     #[cfg(feature = "shell")]
-    inner: crate::shell::Shell,
+    pub(crate) inner: crate::shell::Shell,
     poisoned: bool,
 }
 

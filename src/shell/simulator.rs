@@ -326,6 +326,11 @@ impl Shell {
     pub fn vertex_curvature(&self, kind: CurvatureKind) -> Vec<f64> {
         vertex_curvature(&self.state.x, &self.state.triangles, None, kind)
     }
+
+    /// The mesh's triangles (never change).
+    pub(crate) fn triangles(&self) -> &[[u32; 3]] {
+        &self.state.triangles
+    }
 }
 
 fn coefficients(settings: &ShellSettings, h: f32) -> Coefficients {
