@@ -110,6 +110,8 @@ pub(super) struct State {
     pub(super) partials: Vec<[f64; 3]>,
     pub(super) rest_volume: f64,
     pub(super) diagonal: f32,
+    /// Mean rest edge length, for the stability advice.
+    pub(super) mean_edge: f32,
     /// Consecutive steps whose volume ratio changed by less than STALL_TOLERANCE.
     pub(super) quiet_steps: u32,
     pub(super) stats: ShellStats,
@@ -149,6 +151,9 @@ impl Shell {
         let largest = n.max(triangles.len()).max(bendings.len()).max(edges.len());
         let rest_volume = crate::mesh::signed_volume(&rest, &triangles);
         let diagonal = bounding_box(&rest).diagonal();
+        let mean_edge =
+            (topology.edges.iter().map(|&[a, b]| (rest[b as usize] - rest[a as usize]).length() as f64).sum::<f64>()
+                / topology.edges.len().max(1) as f64) as f32;
         let stats = ShellStats { volume: rest_volume, volume_ratio: 1.0, ..Default::default() };
         let state = State {
             vertex_face_offsets: topology.vertex_face_offsets.clone(),
@@ -170,6 +175,7 @@ impl Shell {
             partials: vec![[0.0; 3]; largest.div_ceil(REDUCE_CHUNK)],
             rest_volume,
             diagonal,
+            mean_edge,
             quiet_steps: 0,
             stats,
             rest,
@@ -281,7 +287,8 @@ impl Shell {
         let start = Instant::now();
         let settings = self.settings;
         let parallel = self.pool.threads() > 1;
-        let previous_ratio = self.state.stats.volume_ratio;
+        let previous_stats = self.state.stats;
+        let previous_ratio = previous_stats.volume_ratio;
         let state = &mut self.state;
         let outcome = self.pool.install(|| state.advance(&settings, parallel, measure));
         let s = &mut self.state;
@@ -301,6 +308,7 @@ impl Shell {
                 s.x.copy_from_slice(&s.x_backup);
                 s.v.copy_from_slice(&s.v_backup);
                 s.p.copy_from_slice(&s.x_backup);
+                s.stats = previous_stats;
                 Err(error)
             }
         }
@@ -363,7 +371,7 @@ impl State {
             }
             // SPEC 1.1 step 3: collisions over x_t -> p. The collision module fills this stage;
             // until then it does nothing and its counters stay 0.
-            self.update_velocities(settings, h, parallel, substep)?;
+            self.update_velocities(settings, h, parallel)?;
             if measure && substep + 1 == settings.substeps {
                 self.measure(settings, &coeff, parallel);
             }
@@ -404,7 +412,7 @@ impl State {
 
     /// SPEC 1.1 step 5: `v = (p - x)/h` (damped), `x = p`; refuses a non-finite or runaway
     /// vertex before anything is committed to x.
-    fn update_velocities(&mut self, settings: &ShellSettings, h: f32, parallel: bool, substep: u32) -> Result<()> {
+    fn update_velocities(&mut self, settings: &ShellSettings, h: f32, parallel: bool) -> Result<()> {
         let n = self.x.len();
         let limit = (DIVERGED_DIAGONALS * self.diagonal).powi(2);
         let (x, pp) = (&self.x, &self.p);
@@ -429,7 +437,6 @@ impl State {
             } else {
                 "a vertex position became NaN or infinite".to_owned()
             };
-            let _ = substep;
             return Err(self.unstable(settings, &what));
         }
         let damp = (1.0 - settings.damping * h).max(0.0);
@@ -447,22 +454,37 @@ impl State {
         Ok(())
     }
 
+    /// The divergence error with an estimate of what would be stable. From rest the pressure
+    /// alone moves a vertex by `T² P / (ρ t)` in a step of length T (substeps do not change the
+    /// acceleration); keeping that below a tenth of the mean rest edge length L needs
+    /// `T <= sqrt(0.1 L ρ t / P)` or `P <= 0.1 L ρ t / T²`. When the pressure is not the cause,
+    /// four times more substeps is suggested.
     fn unstable(&self, settings: &ShellSettings, what: &str) -> Error {
-        let h = settings.time_step;
+        let step = settings.time_step;
+        let areal_mass = settings.density * settings.thickness;
+        let budget = 0.1 * self.mean_edge * areal_mass;
+        let pressure = settings.pressure.abs();
+        let stable_step = if pressure > 0.0 { (budget / pressure).sqrt() } else { f32::INFINITY };
+        let advice = if stable_step < step {
+            format!(
+                "The pressure alone moves a vertex {:.3e} m per step against a mean edge of {:.3e} m: a time_step of at \
+                 most {stable_step:.3e} s or a pressure of at most {:.3e} Pa would be stable; without collisions keep \
+                 stop_volume_ratio above 0 so the run ends before the surface passes through itself",
+                step * step * pressure / areal_mass,
+                self.mean_edge,
+                budget / (step * step)
+            )
+        } else {
+            format!(
+                "Substeps >= {} (a substep of at most {:.3e} s) or a lower Young's modulus than {} Pa would be stable",
+                settings.substeps * 4,
+                step / settings.substeps as f32 / 4.0,
+                settings.youngs_modulus
+            )
+        };
         Error::new(
             ErrorKind::Unstable,
-            format!(
-                "the shell diverged in step {}: {what}; the step was rolled back. With time_step {h} s, {} substeps, \
-                 pressure {} Pa and Young's modulus {} Pa this scene is too stiff or too fast: use substeps >= {} \
-                 (or time_step <= {:.3e} s), or a pressure below {:.3e} Pa",
-                self.stats.step + 1,
-                settings.substeps,
-                settings.pressure,
-                settings.youngs_modulus,
-                settings.substeps * 4,
-                h / 4.0,
-                settings.pressure / 10.0
-            ),
+            format!("the shell diverged in step {}: {what}; the step was rolled back. {advice}", self.stats.step + 1),
         )
     }
 
