@@ -241,7 +241,7 @@ typedef struct SoftshellShellDef {
 typedef struct SoftshellAnisotropyDef {
   // `SOFTSHELL_ANISOTROPY_ARAP` (default), `_STVK` or `_SQRT`.
   uint32_t energy;
-  // Fibre stiffness mu, Pa, in [0, 1e12]. Default 1000 (the default Young's modulus).
+  // Fibre stiffness mu, Pa, in (0, 1e12]. Default 1000 (the default Young's modulus).
   float stiffness;
   // Inward push k_A (paper section 3.3), dimensionless, in [0, 1e6]: each vertex gradient of
   // the fibre constraint gets `+ k_A sqrt(A0) n` (n the face's outward unit normal, A0 its rest

@@ -388,6 +388,13 @@ fn regions_and_buffers_are_checked() {
             SoftshellStatus::InvalidArgument
         );
         wrong = aniso;
+        wrong.stiffness = 0.0;
+        assert_eq!(
+            softshell_shell_add_anisotropic_region(shell.0, ok.as_ptr(), 2, &wrong),
+            SoftshellStatus::InvalidArgument
+        );
+        assert!(last_error().contains("stiffness"));
+        wrong = aniso;
         wrong.target_stretch = 1.5;
         assert_eq!(
             softshell_shell_add_anisotropic_region(shell.0, ok.as_ptr(), 2, &wrong),

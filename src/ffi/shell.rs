@@ -121,7 +121,7 @@ pub struct SoftshellShellDef {
 pub struct SoftshellAnisotropyDef {
     /// `SOFTSHELL_ANISOTROPY_ARAP` (default), `_STVK` or `_SQRT`.
     pub energy: u32,
-    /// Fibre stiffness mu, Pa, in [0, 1e12]. Default 1000 (the default Young's modulus).
+    /// Fibre stiffness mu, Pa, in (0, 1e12]. Default 1000 (the default Young's modulus).
     pub stiffness: f32,
     /// Inward push k_A (paper section 3.3), dimensionless, in [0, 1e6]: each vertex gradient of
     /// the fibre constraint gets `+ k_A sqrt(A0) n` (n the face's outward unit normal, A0 its rest
@@ -375,7 +375,7 @@ mod convert {
             "energy",
             "SOFTSHELL_ANISOTROPY_ARAP (0), SOFTSHELL_ANISOTROPY_STVK (1), SOFTSHELL_ANISOTROPY_SQRT (2)",
         )?;
-        check_range("stiffness", def.stiffness, 0.0, 1e12)?;
+        check_positive("stiffness", def.stiffness, 1e12)?;
         check_range("inward_push", def.inward_push, 0.0, 1e6)?;
         check_positive("target_stretch", def.target_stretch, 1.0)?;
         for (axis, &d) in def.direction.iter().enumerate() {

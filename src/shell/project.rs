@@ -242,7 +242,8 @@ impl State {
                     // SPEC 1.4 with W = kB E t (A0+A1)/2 · E_B (XPBD): bending as stiff as
                     // stretching over one stencil when kB = 1. The paper's PBD form scales the
                     // correction by kB instead (as Bender's library does).
-                    let alpha = Vec4::ONE / (Vec4::splat(c.bending_scale) * (Vec4::splat(1.5) / q));
+                    let alpha = (Vec4::ONE / (Vec4::splat(c.bending_scale) * (Vec4::splat(1.5) / q)))
+                        .min(Vec4::splat(f32::MAX));
                     let (v, scale, dlambda, active) = bending_projection_wide(
                         &x,
                         kk,
@@ -296,7 +297,7 @@ impl State {
                     let mut corr = [Vec3::ZERO; 3];
                     match c.solver {
                         SolverKind::Xpbd => {
-                            let alpha = 1.0 / (params.stiffness * c.aniso_scale);
+                            let alpha = (1.0 / (params.stiffness * c.aniso_scale)).min(f32::MAX);
                             let l = lambda.get(i);
                             let min_c2 = 1e-12 * s.area[i];
                             let dl = xpbd_energy_correction(energy, &grad, &inv, alpha, l, min_c2, &mut corr);

@@ -339,7 +339,8 @@ pub(super) fn coefficients(settings: &ShellSettings, h: f32) -> Coefficients {
         solver: settings.solver,
         material: settings.material,
         lame: Lame::from_young_poisson(1.0, settings.poisson_ratio),
-        alpha_membrane: 1.0 / (k * h * h),
+        // Clamped: a modulus so small that 1/(k h²) overflows must not turn α̃ λ into inf·0.
+        alpha_membrane: (1.0 / (k * h * h)).min(f32::MAX),
         bending_scale: k * settings.bending_coefficient * h * h,
         bending_coefficient: settings.bending_coefficient,
         keep_rest: settings.bending == BendingKind::IsometricRest,
