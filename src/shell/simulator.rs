@@ -62,6 +62,17 @@ pub(crate) const STALL_STEPS: u32 = 60;
 /// no contraction moves a surface that far, only a blow-up does.
 const DIVERGED_DIAGONALS: f32 = 2.0;
 
+/// What the collision stage did in one substep (SPEC 1.6 report).
+#[derive(Clone, Copy, Debug, Default)]
+struct CollisionCounts {
+    /// Pairs left after the broad phase.
+    candidates: u64,
+    /// Exact continuous tests run.
+    ccd_tests: u64,
+    /// Contacts projected.
+    contacts: u64,
+}
+
 /// Per-step constants of the projections.
 #[derive(Clone, Copy)]
 pub(super) struct Coefficients {
@@ -354,6 +365,7 @@ impl State {
         self.v_backup.copy_from_slice(&self.v);
         let h = settings.time_step / settings.substeps as f32;
         let coeff = coefficients(settings, h);
+        let (mut candidates, mut tests, mut contacts) = (0u64, 0u64, 0u64);
         for substep in 0..settings.substeps {
             self.predict(settings.pressure, h, parallel);
             self.lambda_membrane.fill(0.0);
@@ -370,8 +382,14 @@ impl State {
                 }
                 self.project_anisotropics(&coeff, parallel);
             }
-            // SPEC 1.1 step 3: collisions over x_t -> p. The collision module fills this stage;
-            // until then it does nothing and its counters stay 0.
+            // SPEC 1.1 step 3: collisions over x_t -> p, between the constraint sweeps and the
+            // velocity update.
+            if settings.collisions {
+                let counts = self.resolve_collisions(settings);
+                candidates += counts.candidates;
+                tests += counts.ccd_tests;
+                contacts += counts.contacts;
+            }
             self.update_velocities(settings, h, parallel)?;
             if measure && substep + 1 == settings.substeps {
                 self.measure(settings, &coeff, parallel);
@@ -383,7 +401,18 @@ impl State {
         }
         self.stats.volume = volume;
         self.stats.volume_ratio = volume / self.rest_volume;
+        self.stats.collision_candidates = candidates;
+        self.stats.ccd_tests = tests;
+        self.stats.contacts = contacts;
         Ok(())
+    }
+
+    /// SPEC 1.6, the collision stage: finds the vertex-face and edge-edge pairs that come closer
+    /// than the collision thickness over x -> p and projects them apart, on `p`. The collision
+    /// module (issue 4) fills it; until then it finds nothing, allocates nothing and its
+    /// counters stay 0.
+    fn resolve_collisions(&mut self, _settings: &ShellSettings) -> CollisionCounts {
+        CollisionCounts::default()
     }
 
     /// SPEC 1.1 step 1 with the pressure force of SPEC 1.2:
