@@ -13,8 +13,8 @@ use super::settings::{AnisotropySettings, SolverKind};
 use super::simulator::{Coefficients, State};
 use crate::material::{Mat32, Material, anisotropic_energy, membrane_energy};
 use crate::solver::{
-    MembraneLanes, W3, bending_projection_wide, deformation_gradient, distance_correction, pbd_energy_correction,
-    scatter_stress, stvk_projection_wide, xpbd_energy_correction,
+    MembraneLanes, W3, WideTarget, bending_projection_wide, bending_target, deformation_gradient, distance_correction,
+    pbd_energy_correction, scatter_stress, stvk_projection_wide, xpbd_energy_correction,
 };
 
 const IDENTITY_BASIS: Mat32 = Mat32 { c0: Vec3::X, c1: Vec3::Y };
@@ -190,6 +190,24 @@ impl State {
         }
     }
 
+    /// Rest-preserving bending: carries each stencil's rest vector by its frame at the start of
+    /// the substep (after prediction); the iterations then hold it (SPEC 1.4: R is the stencil's
+    /// rotation, held fixed while the gradient is taken).
+    pub(super) fn update_bending_targets(&mut self, parallel: bool) {
+        let s = &mut self.bendings;
+        if s.target.is_empty() {
+            return;
+        }
+        let (p, idx, rest) = (&self.p, &s.idx, &s.rest_local);
+        let target = Shared::new(&mut s.target);
+        for_range(parallel, 0, idx.len(), |i| {
+            let t = &idx[i];
+            let x = [p[t[0] as usize], p[t[1] as usize], p[t[2] as usize], p[t[3] as usize]];
+            // SAFETY: each iteration writes only target[i].
+            unsafe { target.set(i, bending_target(&x, rest[i])) };
+        });
+    }
+
     /// Bending stencils four at a time (SSE lanes): a colour's stencils are independent, so
     /// groups of four consecutive ones are solved together; the last group of a colour repeats
     /// its last stencil in the unused lanes, which are never written back.
@@ -225,10 +243,14 @@ impl State {
                     let lane4 = |a: &[f32]| Vec4::new(a[lanes[0]], a[lanes[1]], a[lanes[2]], a[lanes[3]]);
                     let q = lane4(&s.q);
                     let wk2 = lane4(&s.wk2);
-                    let rest = c.keep_rest.then(|| {
-                        let r = &s.rest_local;
-                        W3::gather([r[lanes[0]], r[lanes[1]], r[lanes[2]], r[lanes[3]]])
+                    let held = c.keep_rest.then(|| {
+                        let t = &s.target;
+                        W3::gather([t[lanes[0]], t[lanes[1]], t[lanes[2]], t[lanes[3]]])
                     });
+                    let target = match &held {
+                        Some(t) => WideTarget::Fixed(t),
+                        None => WideTarget::Flat,
+                    };
                     let lam = if xpbd {
                         Vec4::new(
                             lambda.get(lanes[0]),
@@ -247,7 +269,7 @@ impl State {
                     let (v, scale, dlambda, active) = bending_projection_wide(
                         &x,
                         kk,
-                        rest.as_ref(),
+                        target,
                         q,
                         wk2,
                         xpbd.then_some((alpha, lam)),

@@ -371,6 +371,9 @@ impl State {
             self.lambda_membrane.fill(0.0);
             self.lambda_bending.fill(0.0);
             self.lambda_aniso.fill(0.0);
+            if coeff.keep_rest && coeff.bending_coefficient > 0.0 {
+                self.update_bending_targets(parallel);
+            }
             for _ in 0..settings.iterations {
                 if settings.solver == SolverKind::PbdDistance {
                     self.project_edges(parallel);
