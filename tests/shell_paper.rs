@@ -257,8 +257,12 @@ fn all_materials_contract_stably() {
 #[test]
 fn energy_constraints_over_stretch_less_than_edge_distance_constraints() {
     // Distance constraints only keep edge lengths: a triangle may shear and its area may grow or
-    // shrink freely. The energy constraints keep the whole strain. Compare the largest area
-    // change of a triangle after 100 steps.
+    // shrink freely. The energy constraints keep the whole strain. Compare, after 100 steps of
+    // the paper's setting (PBD, little damping), the largest area stretch of a triangle and the
+    // number of triangles stretched by more than 1%.
+    // Measured: on the sphere the energy constraints never grow a triangle's area while the
+    // distance constraints do (slightly); on the eight, which folds through itself without the
+    // collision stage, both stretch triangles by 13-26% and the trend is not clear.
     let mesh = unit_mesh("sphere.obj", 1.0);
     let area = |pos: &[f32], t: usize| {
         let v = |k: usize| {
@@ -270,6 +274,7 @@ fn energy_constraints_over_stretch_less_than_edge_distance_constraints() {
     let stretch = |solver: u32| {
         let mut d = def();
         d.solver = solver;
+        d.damping = 1.0;
         let shell = new_shell(&mesh, &d);
         run(&shell, 100);
         let n = mesh.positions.len();
@@ -277,12 +282,18 @@ fn energy_constraints_over_stretch_less_than_edge_distance_constraints() {
         let mut len = 0;
         // SAFETY: live shell and buffer.
         unsafe { softshell_shell_copy_positions(shell.0, pos.as_mut_ptr(), n, &mut len) };
-        (0..mesh.triangles.len() / 3).map(|t| area(&pos, t) / area(&mesh.positions, t)).fold(0.0f32, f32::max)
+        let ratios: Vec<f32> =
+            (0..mesh.triangles.len() / 3).map(|t| area(&pos, t) / area(&mesh.positions, t)).collect();
+        (ratios.iter().cloned().fold(0.0f32, f32::max), ratios.iter().filter(|&&r| r > 1.01).count())
     };
     let energy = stretch(SOFTSHELL_SOLVER_PBD);
     let distance = stretch(SOFTSHELL_SOLVER_PBD_DISTANCE);
-    println!("largest area stretch after 100 steps: energy {energy:.4}, edge distance {distance:.4}");
-    assert!(energy < distance, "energy constraints must over-stretch less");
+    println!(
+        "after 100 steps (largest area stretch, triangles stretched > 1%): energy {energy:?}, edge distance {distance:?}"
+    );
+    assert!(energy.0 < distance.0, "energy constraints must over-stretch less");
+    assert!(energy.0 <= 1.0, "the energy constraints keep every triangle from growing");
+    assert!(energy.1 <= distance.1);
 }
 
 #[test]
