@@ -55,13 +55,14 @@ pub(crate) const SHELL_DEF_COOKIE: u32 = 0x5348_4c31;
 pub(crate) const ANISOTROPY_DEF_COOKIE: u32 = 0x414e_4931;
 
 /// Settings of a shell, filled by `softshell_shell_def_default()` and then edited field by field.
-/// The defaults contract a closed mesh scaled to a unit bounding-box diagonal visibly: the
-/// pressure exceeds what the membrane can carry, so the shell buckles and shrinks until
-/// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 80 steps, the
-/// finer kitten within about 20, both monotonically); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
-/// (1 kg/m^2, membrane stiffness E t = 1 N/m); only the ratios pressure : E t : density t matter,
-/// so a mesh of another size wants them scaled (pressure and E t with the size to keep the same
-/// strains).
+///
+/// The defaults are made for a closed mesh scaled to a unit bounding-box diagonal: the shell is
+/// squeezed elastically, buckles and shrinks, its volume falling monotonically until
+/// `stop_volume_ratio` (measured: the unit sphere of data/ passes V/V0 = 0.8 near step 70, the
+/// finer kitten near step 20); with `pressure` 0 it keeps its rest shape. The material describes
+/// a soft, thin, heavy membrane (1 kg/m^2, membrane stiffness E t = 1 N/m). For a mesh s times
+/// larger, the same motion in the same time steps needs pressure x s and Young's modulus x s^2
+/// (thickness and density unchanged).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SoftshellShellDef {
