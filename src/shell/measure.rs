@@ -3,14 +3,11 @@
 
 #![allow(clippy::needless_range_loop)]
 
-use glam::Vec3;
-
-use super::constraints::Bendings;
 use super::exec::{REDUCE_CHUNK, chunk_partials};
 use super::project::{gather_aniso, membrane_energy_at, stencil_area};
 use super::settings::{BendingKind, ShellSettings, SolverKind};
 use super::simulator::{Coefficients, State};
-use crate::solver::bending_energy;
+use crate::solver::bending_residual;
 
 impl State {
     /// Energies (J) and the residual after the last iteration: the largest relative constraint
@@ -57,8 +54,10 @@ impl State {
             chunk_partials(parallel, b.len(), parts, |s, e| {
                 let (mut energy, mut res) = (0.0f64, 0.0f64);
                 for i in s..e {
-                    let xs = b.idx[i].map(|v| x[v as usize]);
-                    let (w, _) = bending_stencil(b, i, &xs, c.keep_rest);
+                    let t = &b.idx[i];
+                    let xs = [x[t[0] as usize], x[t[1] as usize], x[t[2] as usize], x[t[3] as usize]];
+                    let v = bending_residual(&xs, &b.k[i], c.keep_rest.then(|| b.rest_local[i]));
+                    let w = 0.5 * b.q[i] * v.length_squared();
                     let stiffness = k * settings.bending_coefficient * stencil_area(b.q[i]);
                     energy += (stiffness * w) as f64;
                     let cval = (2.0 * w).max(0.0).sqrt();
@@ -84,7 +83,8 @@ impl State {
             chunk_partials(parallel, a.len(), parts, |s, e| {
                 let (mut energy, mut res) = (0.0f64, 0.0f64);
                 for i in s..e {
-                    let xs = a.tri[i].map(|v| x[v as usize]);
+                    let t = &a.tri[i];
+                    let xs = [x[t[0] as usize], x[t[1] as usize], x[t[2] as usize]];
                     let (w, _, params) = gather_aniso(a, i, xs);
                     energy += (params.stiffness * settings.thickness * w) as f64;
                     let cval = (2.0 * w).max(0.0).sqrt();
@@ -101,14 +101,4 @@ impl State {
         self.stats.anisotropic_energy = aniso;
         self.stats.residual = residual;
     }
-}
-
-#[inline(always)]
-fn bending_stencil(s: &Bendings, i: usize, x: &[Vec3; 4], keep_rest: bool) -> (f32, [Vec3; 4]) {
-    let rest = crate::solver::BendingRest {
-        k: s.k[i],
-        q: s.q[i],
-        rest_local: if keep_rest { s.rest_local[i] } else { Vec3::ZERO },
-    };
-    bending_energy(x, &rest, keep_rest)
 }

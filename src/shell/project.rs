@@ -22,8 +22,8 @@ const IDENTITY_BASIS: Mat32 = Mat32 { c0: Vec3::X, c1: Vec3::Y };
 /// Ŵ (unit modulus and thickness) and its gradients for membrane constraint `i` at positions `x`.
 #[inline(always)]
 pub(super) fn membrane_energy_at(m: &Membranes, i: usize, x: &[Vec3], c: &Coefficients) -> (f32, [Vec3; 3]) {
-    let [a, b, d] = m.tri[i];
-    gather_membrane(m, i, [x[a as usize], x[b as usize], x[d as usize]], c)
+    let t = &m.tri[i];
+    gather_membrane(m, i, [x[t[0] as usize], x[t[1] as usize], x[t[2] as usize]], c)
 }
 
 #[inline(always)]
