@@ -537,7 +537,9 @@ impl State {
         chunk_partials(parallel, tris.len(), parts, |s, e| {
             let mut v = 0.0f64;
             for t in &tris[s..e] {
-                let [a, b, c] = t.map(|k| x[k as usize].as_dvec3() - centre);
+                let a = x[t[0] as usize].as_dvec3() - centre;
+                let b = x[t[1] as usize].as_dvec3() - centre;
+                let c = x[t[2] as usize].as_dvec3() - centre;
                 v += a.dot(b.cross(c));
             }
             [v, 0.0, 0.0]
