@@ -411,13 +411,14 @@ typedef struct SoftshellMeshReport {
 } SoftshellMeshReport;
 
 // Settings of a shell, filled by `softshell_shell_def_default()` and then edited field by field.
-// The defaults contract a closed mesh scaled to a unit bounding-box diagonal visibly: the
-// pressure exceeds what the membrane can carry, so the shell buckles and shrinks until
-// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 80 steps, the
-// finer kitten within about 20, both monotonically); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
-// (1 kg/m^2, membrane stiffness E t = 1 N/m); only the ratios pressure : E t : density t matter,
-// so a mesh of another size wants them scaled (pressure and E t with the size to keep the same
-// strains).
+//
+// The defaults are made for a closed mesh scaled to a unit bounding-box diagonal: the shell is
+// squeezed elastically, buckles and shrinks, its volume falling monotonically until
+// `stop_volume_ratio` (measured: the unit sphere of data/ passes V/V0 = 0.8 near step 70, the
+// finer kitten near step 20); with `pressure` 0 it keeps its rest shape. The material describes
+// a soft, thin, heavy membrane (1 kg/m^2, membrane stiffness E t = 1 N/m). For a mesh s times
+// larger, the same motion in the same time steps needs pressure x s and Young's modulus x s^2
+// (thickness and density unchanged).
 typedef struct SoftshellShellDef {
   // Time step h, s, in (0, 1]. Default 1/60.
   float time_step;
@@ -473,7 +474,7 @@ typedef struct SoftshellShellDef {
 typedef struct SoftshellAnisotropyDef {
   // `SOFTSHELL_ANISOTROPY_ARAP` (default), `_STVK` or `_SQRT`.
   uint32_t energy;
-  // Fibre stiffness mu, Pa, in [0, 1e12]. Default 1000 (the default Young's modulus).
+  // Fibre stiffness mu, Pa, in (0, 1e12]. Default 1000 (the default Young's modulus).
   float stiffness;
   // Inward push k_A (paper section 3.3), dimensionless, in [0, 1e6]: each vertex gradient of
   // the fibre constraint gets `+ k_A sqrt(A0) n` (n the face's outward unit normal, A0 its rest

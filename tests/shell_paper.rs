@@ -171,6 +171,21 @@ fn stiff_bending_resists_contraction_and_weak_bending_falls_monotonically() {
     assert!(weak_contracting.windows(2).all(|w| w[1] <= w[0] + 1e-3), "XPBD kB = 1e-2: {weak_contracting:?}");
 }
 
+#[test]
+fn bending_1e_3_is_close_to_no_bending() {
+    // Paper Fig. 16/17: kB = 1e-3 behaves like kB = 0.
+    let mesh = unit_mesh("eight.obj", 1.0);
+    let mut tiny = def();
+    tiny.bending_coefficient = 1e-3;
+    let mut none = def();
+    none.bending = SOFTSHELL_BENDING_NONE;
+    let (a, b) = (run(&new_shell(&mesh, &tiny), 60)[59], run(&new_shell(&mesh, &none), 60)[59]);
+    let c = run(&new_shell(&mesh, &def()), 60)[59];
+    println!("r(60): kB=1e-3 {a:.4}, no bending {b:.4}, kB=1e-2 {c:.4}");
+    // Measured 0.43, 0.36 and 0.75: kB = 1e-3 sits much nearer to no bending than to 1e-2.
+    assert!((a - b).abs() < 0.25 * (c - b).abs(), "kB = 1e-3 {a}, none {b}, kB = 1e-2 {c}");
+}
+
 /// Faces whose centre lies within `radius` of the vertex farthest along +x.
 fn cap_faces(mesh: &Mesh, radius: f32) -> Vec<u32> {
     let p = |v: u32| [0, 1, 2].map(|k| mesh.positions[3 * v as usize + k]);
@@ -257,8 +272,12 @@ fn all_materials_contract_stably() {
 #[test]
 fn energy_constraints_over_stretch_less_than_edge_distance_constraints() {
     // Distance constraints only keep edge lengths: a triangle may shear and its area may grow or
-    // shrink freely. The energy constraints keep the whole strain. Compare the largest area
-    // change of a triangle after 100 steps.
+    // shrink freely. The energy constraints keep the whole strain. Compare, after 100 steps of
+    // the paper's setting (PBD, little damping), the largest area stretch of a triangle and the
+    // number of triangles stretched by more than 1%.
+    // Measured: on the sphere the energy constraints never grow a triangle's area while the
+    // distance constraints do (slightly); on the eight, which folds through itself without the
+    // collision stage, both stretch triangles by 13-26% and the trend is not clear.
     let mesh = unit_mesh("sphere.obj", 1.0);
     let area = |pos: &[f32], t: usize| {
         let v = |k: usize| {
@@ -270,6 +289,7 @@ fn energy_constraints_over_stretch_less_than_edge_distance_constraints() {
     let stretch = |solver: u32| {
         let mut d = def();
         d.solver = solver;
+        d.damping = 1.0;
         let shell = new_shell(&mesh, &d);
         run(&shell, 100);
         let n = mesh.positions.len();
@@ -277,12 +297,18 @@ fn energy_constraints_over_stretch_less_than_edge_distance_constraints() {
         let mut len = 0;
         // SAFETY: live shell and buffer.
         unsafe { softshell_shell_copy_positions(shell.0, pos.as_mut_ptr(), n, &mut len) };
-        (0..mesh.triangles.len() / 3).map(|t| area(&pos, t) / area(&mesh.positions, t)).fold(0.0f32, f32::max)
+        let ratios: Vec<f32> =
+            (0..mesh.triangles.len() / 3).map(|t| area(&pos, t) / area(&mesh.positions, t)).collect();
+        (ratios.iter().cloned().fold(0.0f32, f32::max), ratios.iter().filter(|&&r| r > 1.01).count())
     };
     let energy = stretch(SOFTSHELL_SOLVER_PBD);
     let distance = stretch(SOFTSHELL_SOLVER_PBD_DISTANCE);
-    println!("largest area stretch after 100 steps: energy {energy:.4}, edge distance {distance:.4}");
-    assert!(energy < distance, "energy constraints must over-stretch less");
+    println!(
+        "after 100 steps (largest area stretch, triangles stretched > 1%): energy {energy:?}, edge distance {distance:?}"
+    );
+    assert!(energy.0 < distance.0, "energy constraints must over-stretch less");
+    assert!(energy.0 <= 1.0, "the energy constraints keep every triangle from growing");
+    assert!(energy.1 <= distance.1);
 }
 
 #[test]

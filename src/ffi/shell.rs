@@ -55,13 +55,14 @@ pub(crate) const SHELL_DEF_COOKIE: u32 = 0x5348_4c31;
 pub(crate) const ANISOTROPY_DEF_COOKIE: u32 = 0x414e_4931;
 
 /// Settings of a shell, filled by `softshell_shell_def_default()` and then edited field by field.
-/// The defaults contract a closed mesh scaled to a unit bounding-box diagonal visibly: the
-/// pressure exceeds what the membrane can carry, so the shell buckles and shrinks until
-/// `stop_volume_ratio` (the unit sphere of data/ falls below 0.8 within about 80 steps, the
-/// finer kitten within about 20, both monotonically); with `pressure` 0 it keeps its rest shape. The material values describe a soft, thin, heavy membrane
-/// (1 kg/m^2, membrane stiffness E t = 1 N/m); only the ratios pressure : E t : density t matter,
-/// so a mesh of another size wants them scaled (pressure and E t with the size to keep the same
-/// strains).
+///
+/// The defaults are made for a closed mesh scaled to a unit bounding-box diagonal: the shell is
+/// squeezed elastically, buckles and shrinks, its volume falling monotonically until
+/// `stop_volume_ratio` (measured: the unit sphere of data/ passes V/V0 = 0.8 near step 70, the
+/// finer kitten near step 20); with `pressure` 0 it keeps its rest shape. The material describes
+/// a soft, thin, heavy membrane (1 kg/m^2, membrane stiffness E t = 1 N/m). For a mesh s times
+/// larger, the same motion in the same time steps needs pressure x s and Young's modulus x s^2
+/// (thickness and density unchanged).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SoftshellShellDef {
@@ -121,7 +122,7 @@ pub struct SoftshellShellDef {
 pub struct SoftshellAnisotropyDef {
     /// `SOFTSHELL_ANISOTROPY_ARAP` (default), `_STVK` or `_SQRT`.
     pub energy: u32,
-    /// Fibre stiffness mu, Pa, in [0, 1e12]. Default 1000 (the default Young's modulus).
+    /// Fibre stiffness mu, Pa, in (0, 1e12]. Default 1000 (the default Young's modulus).
     pub stiffness: f32,
     /// Inward push k_A (paper section 3.3), dimensionless, in [0, 1e6]: each vertex gradient of
     /// the fibre constraint gets `+ k_A sqrt(A0) n` (n the face's outward unit normal, A0 its rest
@@ -375,7 +376,7 @@ mod convert {
             "energy",
             "SOFTSHELL_ANISOTROPY_ARAP (0), SOFTSHELL_ANISOTROPY_STVK (1), SOFTSHELL_ANISOTROPY_SQRT (2)",
         )?;
-        check_range("stiffness", def.stiffness, 0.0, 1e12)?;
+        check_positive("stiffness", def.stiffness, 1e12)?;
         check_range("inward_push", def.inward_push, 0.0, 1e6)?;
         check_positive("target_stretch", def.target_stretch, 1.0)?;
         for (axis, &d) in def.direction.iter().enumerate() {

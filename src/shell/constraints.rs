@@ -93,6 +93,9 @@ pub(crate) struct Bendings {
     pub q: Vec<f32>,
     /// Rest `Σ K_i X_i` in the stencil frame: only for the rest-preserving model.
     pub rest_local: Vec<Vec3>,
+    /// That vector carried by the stencil's frame at the start of the substep, held through the
+    /// iterations (scratch; only for the rest-preserving model).
+    pub target: Vec<Vec3>,
     pub colours: Vec<usize>,
 }
 
@@ -120,6 +123,7 @@ impl Bendings {
         s.q.reserve_exact(order.len());
         if keep_rest {
             s.rest_local.reserve_exact(order.len());
+            s.target = vec![Vec3::ZERO; order.len()];
         }
         for &i in &order {
             let r = &rests[i as usize];
@@ -153,6 +157,7 @@ impl Bendings {
             + vec_bytes(&self.k)
             + vec_bytes(&self.q)
             + vec_bytes(&self.rest_local)
+            + vec_bytes(&self.target)
             + vec_bytes(&self.colours)
     }
 }

@@ -8,6 +8,8 @@
 
 mod constraints;
 mod exec;
+mod measure;
+mod project;
 mod settings;
 mod simulator;
 

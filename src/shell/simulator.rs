@@ -9,19 +9,16 @@
 
 use std::time::Instant;
 
-use glam::{Vec3, Vec4};
+use glam::Vec3;
 
 use super::constraints::{Anisotropics, Bendings, Edges, Membranes, Region};
-use super::exec::{MIN_PARALLEL, REDUCE_CHUNK, Shared, chunk_partials, for_range, for_range_min};
+use super::exec::{REDUCE_CHUNK, Shared, chunk_partials, for_range};
+use super::project::membrane_energy_at;
 use super::settings::{AnisotropySettings, BendingKind, ShellSettings, SolverKind};
 use crate::error::{Error, ErrorKind, Result};
-use crate::material::{Lame, Mat32, Material, anisotropic_energy, membrane_energy};
+use crate::material::{Lame, Material};
 use crate::mesh::{CurvatureKind, Topology, TriMesh, bounding_box, require_closed_oriented_solid, vertex_curvature};
 use crate::parallel::WorkerPool;
-use crate::solver::{
-    MembraneLanes, W3, bending_energy, bending_projection_wide, deformation_gradient, distance_correction,
-    pbd_energy_correction, scatter_stress, stvk_projection_wide, xpbd_energy_correction,
-};
 
 /// What one step did (SPEC 4: error measures beside the time).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -65,21 +62,32 @@ pub(crate) const STALL_STEPS: u32 = 60;
 /// no contraction moves a surface that far, only a blow-up does.
 const DIVERGED_DIAGONALS: f32 = 2.0;
 
+/// What the collision stage did in one substep (SPEC 1.6 report).
+#[derive(Clone, Copy, Debug, Default)]
+struct CollisionCounts {
+    /// Pairs left after the broad phase.
+    candidates: u64,
+    /// Exact continuous tests run.
+    ccd_tests: u64,
+    /// Contacts projected.
+    contacts: u64,
+}
+
 /// Per-step constants of the projections.
 #[derive(Clone, Copy)]
-struct Coefficients {
-    solver: SolverKind,
-    material: Material,
+pub(super) struct Coefficients {
+    pub(super) solver: SolverKind,
+    pub(super) material: Material,
     /// Lamé parameters at unit Young's modulus (the XPBD split W = k Ŵ).
-    lame: Lame,
+    pub(super) lame: Lame,
     /// α̃ of the membrane: 1/(E t h²).
-    alpha_membrane: f32,
+    pub(super) alpha_membrane: f32,
     /// E t h²·kB (bending α̃ = 1/(kb_scale · stencil area)).
-    bending_scale: f32,
-    bending_coefficient: f32,
-    keep_rest: bool,
+    pub(super) bending_scale: f32,
+    pub(super) bending_coefficient: f32,
+    pub(super) keep_rest: bool,
     /// t h², for the anisotropic α̃ = 1/(μ t h²).
-    aniso_scale: f32,
+    pub(super) aniso_scale: f32,
 }
 
 /// The contraction simulator.
@@ -89,33 +97,35 @@ pub struct Shell {
     state: State,
 }
 
-struct State {
-    triangles: Vec<[u32; 3]>,
-    vertex_face_offsets: Vec<u32>,
-    vertex_faces: Vec<u32>,
-    rest: Vec<Vec3>,
-    x: Vec<Vec3>,
-    v: Vec<Vec3>,
-    p: Vec<Vec3>,
-    inv_mass: Vec<f32>,
-    x_backup: Vec<Vec3>,
-    v_backup: Vec<Vec3>,
-    membranes: Membranes,
+pub(super) struct State {
+    pub(super) triangles: Vec<[u32; 3]>,
+    pub(super) vertex_face_offsets: Vec<u32>,
+    pub(super) vertex_faces: Vec<u32>,
+    pub(super) rest: Vec<Vec3>,
+    pub(super) x: Vec<Vec3>,
+    pub(super) v: Vec<Vec3>,
+    pub(super) p: Vec<Vec3>,
+    pub(super) inv_mass: Vec<f32>,
+    pub(super) x_backup: Vec<Vec3>,
+    pub(super) v_backup: Vec<Vec3>,
+    pub(super) membranes: Membranes,
     /// Edge-distance constraints: only for the distance solver.
-    edges: Edges,
-    lambda_membrane: Vec<f32>,
-    bendings: Bendings,
-    lambda_bending: Vec<f32>,
-    regions: Vec<Region>,
-    anisotropics: Option<Anisotropics>,
-    lambda_aniso: Vec<f32>,
+    pub(super) edges: Edges,
+    pub(super) lambda_membrane: Vec<f32>,
+    pub(super) bendings: Bendings,
+    pub(super) lambda_bending: Vec<f32>,
+    pub(super) regions: Vec<Region>,
+    pub(super) anisotropics: Option<Anisotropics>,
+    pub(super) lambda_aniso: Vec<f32>,
     /// Reduction scratch, one slot per REDUCE_CHUNK items of the largest array.
-    partials: Vec<[f64; 3]>,
-    rest_volume: f64,
-    diagonal: f32,
+    pub(super) partials: Vec<[f64; 3]>,
+    pub(super) rest_volume: f64,
+    pub(super) diagonal: f32,
+    /// Mean rest edge length, for the stability advice.
+    pub(super) mean_edge: f32,
     /// Consecutive steps whose volume ratio changed by less than STALL_TOLERANCE.
-    quiet_steps: u32,
-    stats: ShellStats,
+    pub(super) quiet_steps: u32,
+    pub(super) stats: ShellStats,
 }
 
 impl Shell {
@@ -152,6 +162,9 @@ impl Shell {
         let largest = n.max(triangles.len()).max(bendings.len()).max(edges.len());
         let rest_volume = crate::mesh::signed_volume(&rest, &triangles);
         let diagonal = bounding_box(&rest).diagonal();
+        let mean_edge =
+            (topology.edges.iter().map(|&[a, b]| (rest[b as usize] - rest[a as usize]).length() as f64).sum::<f64>()
+                / topology.edges.len().max(1) as f64) as f32;
         let stats = ShellStats { volume: rest_volume, volume_ratio: 1.0, ..Default::default() };
         let state = State {
             vertex_face_offsets: topology.vertex_face_offsets.clone(),
@@ -173,6 +186,7 @@ impl Shell {
             partials: vec![[0.0; 3]; largest.div_ceil(REDUCE_CHUNK)],
             rest_volume,
             diagonal,
+            mean_edge,
             quiet_steps: 0,
             stats,
             rest,
@@ -284,7 +298,8 @@ impl Shell {
         let start = Instant::now();
         let settings = self.settings;
         let parallel = self.pool.threads() > 1;
-        let previous_ratio = self.state.stats.volume_ratio;
+        let previous_stats = self.state.stats;
+        let previous_ratio = previous_stats.volume_ratio;
         let state = &mut self.state;
         let outcome = self.pool.install(|| state.advance(&settings, parallel, measure));
         let s = &mut self.state;
@@ -304,6 +319,7 @@ impl Shell {
                 s.x.copy_from_slice(&s.x_backup);
                 s.v.copy_from_slice(&s.v_backup);
                 s.p.copy_from_slice(&s.x_backup);
+                s.stats = previous_stats;
                 Err(error)
             }
         }
@@ -333,54 +349,19 @@ impl Shell {
     }
 }
 
-fn coefficients(settings: &ShellSettings, h: f32) -> Coefficients {
+pub(super) fn coefficients(settings: &ShellSettings, h: f32) -> Coefficients {
     let k = settings.youngs_modulus * settings.thickness;
     Coefficients {
         solver: settings.solver,
         material: settings.material,
         lame: Lame::from_young_poisson(1.0, settings.poisson_ratio),
-        alpha_membrane: 1.0 / (k * h * h),
+        // Clamped: a modulus so small that 1/(k h²) overflows must not turn α̃ λ into inf·0.
+        alpha_membrane: (1.0 / (k * h * h)).min(f32::MAX),
         bending_scale: k * settings.bending_coefficient * h * h,
         bending_coefficient: settings.bending_coefficient,
         keep_rest: settings.bending == BendingKind::IsometricRest,
         aniso_scale: settings.thickness * h * h,
     }
-}
-
-const IDENTITY_BASIS: Mat32 = Mat32 { c0: Vec3::X, c1: Vec3::Y };
-
-/// Ŵ (unit modulus and thickness) and its gradients for membrane constraint `i` at positions `x`.
-#[inline(always)]
-fn membrane_energy_at(m: &Membranes, i: usize, x: &[Vec3], c: &Coefficients) -> (f32, [Vec3; 3]) {
-    let [a, b, d] = m.tri[i];
-    gather_membrane(m, i, [x[a as usize], x[b as usize], x[d as usize]], c)
-}
-
-#[inline(always)]
-fn gather_membrane(m: &Membranes, i: usize, x: [Vec3; 3], c: &Coefficients) -> (f32, [Vec3; 3]) {
-    let dm = &m.dm_inv[i];
-    let f = deformation_gradient(x, dm);
-    let basis = if c.material == Material::Linear { &m.basis[i] } else { &IDENTITY_BASIS };
-    let (psi, stress) = membrane_energy(c.material, c.lame, &f, basis);
-    let area = m.area[i];
-    (area * psi, scatter_stress(&stress, dm, area))
-}
-
-/// Stencil area (A0 + A1)/2 from q = 3/(A0 + A1).
-#[inline(always)]
-fn stencil_area(q: f32) -> f32 {
-    1.5 / q
-}
-
-/// Ŵ and gradients of anisotropic constraint `i` (unit stiffness and thickness).
-#[inline(always)]
-fn gather_aniso(a: &Anisotropics, i: usize, x: [Vec3; 3]) -> (f32, [Vec3; 3], &AnisotropySettings) {
-    let dm = &a.dm_inv[i];
-    let f = deformation_gradient(x, dm);
-    let params = &a.params[a.region[i] as usize];
-    let (psi, stress) = anisotropic_energy(params.energy, 1.0, params.target_stretch, &f, a.dir[i]);
-    let area = a.area[i];
-    (area * psi, scatter_stress(&stress, dm, area), params)
 }
 
 impl State {
@@ -389,11 +370,15 @@ impl State {
         self.v_backup.copy_from_slice(&self.v);
         let h = settings.time_step / settings.substeps as f32;
         let coeff = coefficients(settings, h);
+        let (mut candidates, mut tests, mut contacts) = (0u64, 0u64, 0u64);
         for substep in 0..settings.substeps {
             self.predict(settings.pressure, h, parallel);
             self.lambda_membrane.fill(0.0);
             self.lambda_bending.fill(0.0);
             self.lambda_aniso.fill(0.0);
+            if coeff.keep_rest && coeff.bending_coefficient > 0.0 {
+                self.update_bending_targets(parallel);
+            }
             for _ in 0..settings.iterations {
                 if settings.solver == SolverKind::PbdDistance {
                     self.project_edges(parallel);
@@ -405,9 +390,15 @@ impl State {
                 }
                 self.project_anisotropics(&coeff, parallel);
             }
-            // SPEC 1.1 step 3: collisions over x_t -> p. The collision module fills this stage;
-            // until then it does nothing and its counters stay 0.
-            self.update_velocities(settings, h, parallel, substep)?;
+            // SPEC 1.1 step 3: collisions over x_t -> p, between the constraint sweeps and the
+            // velocity update.
+            if settings.collisions {
+                let counts = self.resolve_collisions(settings);
+                candidates += counts.candidates;
+                tests += counts.ccd_tests;
+                contacts += counts.contacts;
+            }
+            self.update_velocities(settings, h, parallel)?;
             if measure && substep + 1 == settings.substeps {
                 self.measure(settings, &coeff, parallel);
             }
@@ -418,7 +409,18 @@ impl State {
         }
         self.stats.volume = volume;
         self.stats.volume_ratio = volume / self.rest_volume;
+        self.stats.collision_candidates = candidates;
+        self.stats.ccd_tests = tests;
+        self.stats.contacts = contacts;
         Ok(())
+    }
+
+    /// SPEC 1.6, the collision stage: finds the vertex-face and edge-edge pairs that come closer
+    /// than the collision thickness over x -> p and projects them apart, on `p`. The collision
+    /// module (issue 4) fills it; until then it finds nothing, allocates nothing and its
+    /// counters stay 0.
+    fn resolve_collisions(&mut self, _settings: &ShellSettings) -> CollisionCounts {
+        CollisionCounts::default()
     }
 
     /// SPEC 1.1 step 1 with the pressure force of SPEC 1.2:
@@ -446,274 +448,9 @@ impl State {
         });
     }
 
-    /// StVK (the default) four triangles at a time (SSE lanes), as the bending stencils; the
-    /// other materials one at a time.
-    fn project_membranes_stvk(&mut self, c: &Coefficients, parallel: bool) {
-        let m = &self.membranes;
-        let p = Shared::new(&mut self.p);
-        let lambda = Shared::new(&mut self.lambda_membrane);
-        let xpbd = c.solver == SolverKind::Xpbd;
-        let alpha = Vec4::splat(c.alpha_membrane);
-        for colour in m.colours.windows(2) {
-            let (start, end) = (colour[0], colour[1]);
-            for_range_min(parallel, 0, (end - start).div_ceil(4), MIN_PARALLEL / 4, |g| {
-                let base = start + 4 * g;
-                let real = (end - base).min(4);
-                let last = real - 1;
-                let lanes: [usize; 4] = [base, base + 1.min(last), base + 2.min(last), base + 3.min(last)];
-                let id = |j: usize| {
-                    let t = &m.tri[lanes[j]];
-                    [t[0] as usize, t[1] as usize, t[2] as usize]
-                };
-                let idx = [id(0), id(1), id(2), id(3)];
-                let lane4 = |a: &[f32]| Vec4::new(a[lanes[0]], a[lanes[1]], a[lanes[2]], a[lanes[3]]);
-                let (d0, d1, d2, d3) =
-                    (&m.dm_inv[lanes[0]], &m.dm_inv[lanes[1]], &m.dm_inv[lanes[2]], &m.dm_inv[lanes[3]]);
-                let (w0, w1, w2, w3) =
-                    (&m.inv_mass[lanes[0]], &m.inv_mass[lanes[1]], &m.inv_mass[lanes[2]], &m.inv_mass[lanes[3]]);
-                let rest = MembraneLanes {
-                    dm_inv: [
-                        Vec4::new(d0[0], d1[0], d2[0], d3[0]),
-                        Vec4::new(d0[1], d1[1], d2[1], d3[1]),
-                        Vec4::new(d0[2], d1[2], d2[2], d3[2]),
-                        Vec4::new(d0[3], d1[3], d2[3], d3[3]),
-                    ],
-                    area: lane4(&m.area),
-                    inv_mass: [
-                        Vec4::new(w0[0], w1[0], w2[0], w3[0]),
-                        Vec4::new(w0[1], w1[1], w2[1], w3[1]),
-                        Vec4::new(w0[2], w1[2], w2[2], w3[2]),
-                    ],
-                };
-                // SAFETY: triangles of one colour touch disjoint vertices; lambda[i] is i's. The
-                // padding lanes read the last real triangle again and are not written.
-                unsafe {
-                    let vertex =
-                        |k: usize| W3::gather([p.get(idx[0][k]), p.get(idx[1][k]), p.get(idx[2][k]), p.get(idx[3][k])]);
-                    let x = [vertex(0), vertex(1), vertex(2)];
-                    let lam = if xpbd {
-                        Vec4::new(
-                            lambda.get(lanes[0]),
-                            lambda.get(lanes[1]),
-                            lambda.get(lanes[2]),
-                            lambda.get(lanes[3]),
-                        )
-                    } else {
-                        Vec4::ZERO
-                    };
-                    let (corr, dlambda, active) =
-                        stvk_projection_wide(&x, &rest, c.lame.mu, c.lame.lambda, xpbd.then_some((alpha, lam)));
-                    for j in 0..real {
-                        if active & (1 << j) == 0 {
-                            continue;
-                        }
-                        if xpbd {
-                            lambda.set(lanes[j], lam[j] + dlambda[j]);
-                        }
-                        for k in 0..3 {
-                            p.set(idx[j][k], x[k].lane(j) + corr[k].lane(j));
-                        }
-                    }
-                }
-            });
-        }
-    }
-
-    fn project_membranes(&mut self, c: &Coefficients, parallel: bool) {
-        if c.material == Material::StVK {
-            return self.project_membranes_stvk(c, parallel);
-        }
-        let m = &self.membranes;
-        let p = Shared::new(&mut self.p);
-        let lambda = Shared::new(&mut self.lambda_membrane);
-        for colour in m.colours.windows(2) {
-            for_range(parallel, colour[0], colour[1], |i| {
-                let t = &m.tri[i];
-                let (a, b, d) = (t[0] as usize, t[1] as usize, t[2] as usize);
-                // SAFETY: constraints of one colour touch disjoint vertices, and constraint i
-                // alone owns lambda[i].
-                unsafe {
-                    let x = [p.get(a), p.get(b), p.get(d)];
-                    let (energy, grad) = gather_membrane(m, i, x, c);
-                    let inv = m.inv_mass[i];
-                    let mut corr = [Vec3::ZERO; 3];
-                    match c.solver {
-                        SolverKind::Xpbd => {
-                            let l = lambda.get(i);
-                            // At rest when sqrt(2 ψ) < 1e-6 (a strain of about 1e-6).
-                            let min_c2 = 1e-12 * m.area[i];
-                            let dl =
-                                xpbd_energy_correction(energy, &grad, &inv, c.alpha_membrane, l, min_c2, &mut corr);
-                            if dl == 0.0 {
-                                return;
-                            }
-                            lambda.set(i, l + dl);
-                        }
-                        SolverKind::Pbd | SolverKind::PbdDistance => {
-                            if !pbd_energy_correction(energy, &grad, &inv, 1.0, &mut corr) {
-                                return;
-                            }
-                        }
-                    }
-                    p.set(a, x[0] + corr[0]);
-                    p.set(b, x[1] + corr[1]);
-                    p.set(d, x[2] + corr[2]);
-                }
-            });
-        }
-    }
-
-    fn project_edges(&mut self, parallel: bool) {
-        let e = &self.edges;
-        let w = &self.inv_mass;
-        let p = Shared::new(&mut self.p);
-        for colour in e.colours.windows(2) {
-            for_range(parallel, colour[0], colour[1], |i| {
-                let (a, b) = (e.idx[i][0] as usize, e.idx[i][1] as usize);
-                // SAFETY: edges of one colour touch disjoint vertices.
-                unsafe {
-                    let (xa, xb) = (p.get(a), p.get(b));
-                    if let Some((da, db)) = distance_correction(xa, xb, w[a], w[b], e.rest[i]) {
-                        p.set(a, xa + da);
-                        p.set(b, xb + db);
-                    }
-                }
-            });
-        }
-    }
-
-    /// Bending stencils four at a time (SSE lanes): a colour's stencils are independent, so
-    /// groups of four consecutive ones are solved together; the last group of a colour repeats
-    /// its last stencil in the unused lanes, which are never written back.
-    fn project_bendings(&mut self, c: &Coefficients, parallel: bool) {
-        let s = &self.bendings;
-        let p = Shared::new(&mut self.p);
-        let lambda = Shared::new(&mut self.lambda_bending);
-        let xpbd = c.solver == SolverKind::Xpbd;
-        for colour in s.colours.windows(2) {
-            let (start, end) = (colour[0], colour[1]);
-            for_range_min(parallel, 0, (end - start).div_ceil(4), MIN_PARALLEL / 4, |g| {
-                let base = start + 4 * g;
-                let real = (end - base).min(4);
-                let last = real - 1;
-                let lanes: [usize; 4] = [base, base + 1.min(last), base + 2.min(last), base + 3.min(last)];
-                let id = |j: usize| {
-                    let t = &s.idx[lanes[j]];
-                    [t[0] as usize, t[1] as usize, t[2] as usize, t[3] as usize]
-                };
-                let idx = [id(0), id(1), id(2), id(3)];
-                // SAFETY: stencils of one colour touch disjoint vertices; lambda[i] is i's. The
-                // padding lanes read the last real stencil again and are not written.
-                unsafe {
-                    let vertex =
-                        |k: usize| W3::gather([p.get(idx[0][k]), p.get(idx[1][k]), p.get(idx[2][k]), p.get(idx[3][k])]);
-                    let x = [vertex(0), vertex(1), vertex(2), vertex(3)];
-                    let (k0, k1, k2, k3) = (&s.k[lanes[0]], &s.k[lanes[1]], &s.k[lanes[2]], &s.k[lanes[3]]);
-                    let kk = [
-                        Vec4::new(k0[1], k1[1], k2[1], k3[1]),
-                        Vec4::new(k0[2], k1[2], k2[2], k3[2]),
-                        Vec4::new(k0[3], k1[3], k2[3], k3[3]),
-                    ];
-                    let lane4 = |a: &[f32]| Vec4::new(a[lanes[0]], a[lanes[1]], a[lanes[2]], a[lanes[3]]);
-                    let q = lane4(&s.q);
-                    let wk2 = lane4(&s.wk2);
-                    let rest = c.keep_rest.then(|| {
-                        let r = &s.rest_local;
-                        W3::gather([r[lanes[0]], r[lanes[1]], r[lanes[2]], r[lanes[3]]])
-                    });
-                    let lam = if xpbd {
-                        Vec4::new(
-                            lambda.get(lanes[0]),
-                            lambda.get(lanes[1]),
-                            lambda.get(lanes[2]),
-                            lambda.get(lanes[3]),
-                        )
-                    } else {
-                        Vec4::ZERO
-                    };
-                    // SPEC 1.4 with W = kB E t (A0+A1)/2 · E_B (XPBD): bending as stiff as
-                    // stretching over one stencil when kB = 1. The paper's PBD form scales the
-                    // correction by kB instead (as Bender's library does).
-                    let alpha = Vec4::ONE / (Vec4::splat(c.bending_scale) * (Vec4::splat(1.5) / q));
-                    let (v, scale, dlambda, active) = bending_projection_wide(
-                        &x,
-                        kk,
-                        rest.as_ref(),
-                        q,
-                        wk2,
-                        xpbd.then_some((alpha, lam)),
-                        c.bending_coefficient,
-                        1e-7,
-                    );
-                    for j in 0..real {
-                        if active & (1 << j) == 0 {
-                            continue;
-                        }
-                        let i = lanes[j];
-                        if xpbd {
-                            lambda.set(i, lam[j] + dlambda[j]);
-                        }
-                        let (vj, sj, wk) = (v.lane(j), scale[j], &s.wk[i]);
-                        for k in 0..4 {
-                            p.set(idx[j][k], x[k].lane(j) + vj * (wk[k] * sj));
-                        }
-                    }
-                }
-            });
-        }
-    }
-
-    fn project_anisotropics(&mut self, c: &Coefficients, parallel: bool) {
-        let Some(s) = &self.anisotropics else { return };
-        let w = &self.inv_mass;
-        let p = Shared::new(&mut self.p);
-        let lambda = Shared::new(&mut self.lambda_aniso);
-        for colour in s.colours.windows(2) {
-            for_range(parallel, colour[0], colour[1], |i| {
-                let t = &s.tri[i];
-                let (a, b, d) = (t[0] as usize, t[1] as usize, t[2] as usize);
-                // SAFETY: constraints of one colour touch disjoint vertices; lambda[i] is i's.
-                unsafe {
-                    let x = [p.get(a), p.get(b), p.get(d)];
-                    let (energy, mut grad, params) = gather_aniso(s, i, x);
-                    // SPEC 1.5: every vertex gradient gets + k_A n (outward unit normal), so the
-                    // correction moves the region inwards. k_A is scaled by √A0 so that it acts
-                    // the same at any mesh scale (the gradient of A0 ψ scales with a length).
-                    let n = (x[1] - x[0]).cross(x[2] - x[0]).normalize_or_zero();
-                    let push = n * (params.inward_push * s.area[i].sqrt());
-                    for g in &mut grad {
-                        *g += push;
-                    }
-                    let inv = [w[a], w[b], w[d]];
-                    let mut corr = [Vec3::ZERO; 3];
-                    match c.solver {
-                        SolverKind::Xpbd => {
-                            let alpha = 1.0 / (params.stiffness * c.aniso_scale);
-                            let l = lambda.get(i);
-                            let min_c2 = 1e-12 * s.area[i];
-                            let dl = xpbd_energy_correction(energy, &grad, &inv, alpha, l, min_c2, &mut corr);
-                            if dl == 0.0 {
-                                return;
-                            }
-                            lambda.set(i, l + dl);
-                        }
-                        SolverKind::Pbd | SolverKind::PbdDistance => {
-                            if !pbd_energy_correction(energy, &grad, &inv, 1.0, &mut corr) {
-                                return;
-                            }
-                        }
-                    }
-                    p.set(a, x[0] + corr[0]);
-                    p.set(b, x[1] + corr[1]);
-                    p.set(d, x[2] + corr[2]);
-                }
-            });
-        }
-    }
-
     /// SPEC 1.1 step 5: `v = (p - x)/h` (damped), `x = p`; refuses a non-finite or runaway
     /// vertex before anything is committed to x.
-    fn update_velocities(&mut self, settings: &ShellSettings, h: f32, parallel: bool, substep: u32) -> Result<()> {
+    fn update_velocities(&mut self, settings: &ShellSettings, h: f32, parallel: bool) -> Result<()> {
         let n = self.x.len();
         let limit = (DIVERGED_DIAGONALS * self.diagonal).powi(2);
         let (x, pp) = (&self.x, &self.p);
@@ -738,7 +475,6 @@ impl State {
             } else {
                 "a vertex position became NaN or infinite".to_owned()
             };
-            let _ = substep;
             return Err(self.unstable(settings, &what));
         }
         let damp = (1.0 - settings.damping * h).max(0.0);
@@ -756,22 +492,37 @@ impl State {
         Ok(())
     }
 
+    /// The divergence error with an estimate of what would be stable. From rest the pressure
+    /// alone moves a vertex by `T² P / (ρ t)` in a step of length T (substeps do not change the
+    /// acceleration); keeping that below a tenth of the mean rest edge length L needs
+    /// `T <= sqrt(0.1 L ρ t / P)` or `P <= 0.1 L ρ t / T²`. When the pressure is not the cause,
+    /// four times more substeps is suggested.
     fn unstable(&self, settings: &ShellSettings, what: &str) -> Error {
-        let h = settings.time_step;
+        let step = settings.time_step;
+        let areal_mass = settings.density * settings.thickness;
+        let budget = 0.1 * self.mean_edge * areal_mass;
+        let pressure = settings.pressure.abs();
+        let stable_step = if pressure > 0.0 { (budget / pressure).sqrt() } else { f32::INFINITY };
+        let advice = if stable_step < step {
+            format!(
+                "The pressure alone moves a vertex {:.3e} m per step against a mean edge of {:.3e} m: a time_step of at \
+                 most {stable_step:.3e} s or a pressure of at most {:.3e} Pa would be stable; without collisions keep \
+                 stop_volume_ratio above 0 so the run ends before the surface passes through itself",
+                step * step * pressure / areal_mass,
+                self.mean_edge,
+                budget / (step * step)
+            )
+        } else {
+            format!(
+                "Substeps >= {} (a substep of at most {:.3e} s) or a lower Young's modulus than {} Pa would be stable",
+                settings.substeps * 4,
+                step / settings.substeps as f32 / 4.0,
+                settings.youngs_modulus
+            )
+        };
         Error::new(
             ErrorKind::Unstable,
-            format!(
-                "the shell diverged in step {}: {what}; the step was rolled back. With time_step {h} s, {} substeps, \
-                 pressure {} Pa and Young's modulus {} Pa this scene is too stiff or too fast: use substeps >= {} \
-                 (or time_step <= {:.3e} s), or a pressure below {:.3e} Pa",
-                self.stats.step + 1,
-                settings.substeps,
-                settings.pressure,
-                settings.youngs_modulus,
-                settings.substeps * 4,
-                h / 4.0,
-                settings.pressure / 10.0
-            ),
+            format!("the shell diverged in step {}: {what}; the step was rolled back. {advice}", self.stats.step + 1),
         )
     }
 
@@ -791,110 +542,13 @@ impl State {
         chunk_partials(parallel, tris.len(), parts, |s, e| {
             let mut v = 0.0f64;
             for t in &tris[s..e] {
-                let [a, b, c] = t.map(|k| x[k as usize].as_dvec3() - centre);
+                let a = x[t[0] as usize].as_dvec3() - centre;
+                let b = x[t[1] as usize].as_dvec3() - centre;
+                let c = x[t[2] as usize].as_dvec3() - centre;
                 v += a.dot(b.cross(c));
             }
             [v, 0.0, 0.0]
         });
         parts.iter().map(|s| s[0]).sum::<f64>() / 6.0
     }
-
-    /// Energies (J) and the residual after the last iteration: the largest relative constraint
-    /// violation, |C + α̃ λ| for XPBD and |C| for PBD, with C = sqrt(2 Ŵ) made dimensionless
-    /// (divided by √A0 for membrane and anisotropic constraints; bending's C already is).
-    fn measure(&mut self, settings: &ShellSettings, c: &Coefficients, parallel: bool) {
-        let k = settings.youngs_modulus * settings.thickness;
-        let xpbd = c.solver == SolverKind::Xpbd;
-        let (x, m, lm) = (&self.x, &self.membranes, &self.lambda_membrane);
-        let parts = &mut self.partials[..m.len().div_ceil(REDUCE_CHUNK)];
-        chunk_partials(parallel, m.len(), parts, |s, e| {
-            let (mut energy, mut residual) = (0.0f64, 0.0f64);
-            for i in s..e {
-                let (w, _) = membrane_energy_at(m, i, x, c);
-                energy += (k * w) as f64;
-                let cval = (2.0 * w).max(0.0).sqrt();
-                let r = if xpbd { cval + c.alpha_membrane * lm[i] } else { cval };
-                residual = residual.max((r.abs() / m.area[i].sqrt()) as f64);
-            }
-            [energy, residual, 0.0]
-        });
-        let elastic = parts.iter().map(|s| s[0]).sum::<f64>();
-        let mut residual = parts.iter().fold(0.0f64, |a, s| a.max(s[1]));
-        if c.solver == SolverKind::PbdDistance {
-            // The distance solver's own constraints: the largest relative edge-length error.
-            let e = &self.edges;
-            let parts = &mut self.partials[..e.len().div_ceil(REDUCE_CHUNK)];
-            chunk_partials(parallel, e.len(), parts, |s, end| {
-                let mut worst = 0.0f64;
-                for i in s..end {
-                    let [a, b] = e.idx[i];
-                    let len = (x[b as usize] - x[a as usize]).length();
-                    worst = worst.max(((len - e.rest[i]) / e.rest[i]).abs() as f64);
-                }
-                [worst, 0.0, 0.0]
-            });
-            residual = parts.iter().fold(0.0f64, |a, s| a.max(s[0]));
-        }
-
-        let mut bending = 0.0;
-        if settings.bending != BendingKind::None {
-            let (b, lb) = (&self.bendings, &self.lambda_bending);
-            let parts = &mut self.partials[..b.len().div_ceil(REDUCE_CHUNK)];
-            chunk_partials(parallel, b.len(), parts, |s, e| {
-                let (mut energy, mut res) = (0.0f64, 0.0f64);
-                for i in s..e {
-                    let xs = b.idx[i].map(|v| x[v as usize]);
-                    let (w, _) = bending_stencil(b, i, &xs, c.keep_rest);
-                    let stiffness = k * settings.bending_coefficient * stencil_area(b.q[i]);
-                    energy += (stiffness * w) as f64;
-                    let cval = (2.0 * w).max(0.0).sqrt();
-                    let r = if xpbd && stiffness > 0.0 {
-                        cval + lb[i] / (stiffness * settings.time_step.powi(2) / (settings.substeps as f32).powi(2))
-                    } else {
-                        cval
-                    };
-                    res = res.max(r.abs() as f64);
-                }
-                [energy, res, 0.0]
-            });
-            bending = parts.iter().map(|s| s[0]).sum::<f64>();
-            if settings.bending_coefficient > 0.0 {
-                residual = residual.max(parts.iter().fold(0.0f64, |a, s| a.max(s[1])));
-            }
-        }
-
-        let mut aniso = 0.0;
-        if let Some(a) = &self.anisotropics {
-            let la = &self.lambda_aniso;
-            let parts = &mut self.partials[..a.len().div_ceil(REDUCE_CHUNK)];
-            chunk_partials(parallel, a.len(), parts, |s, e| {
-                let (mut energy, mut res) = (0.0f64, 0.0f64);
-                for i in s..e {
-                    let xs = a.tri[i].map(|v| x[v as usize]);
-                    let (w, _, params) = gather_aniso(a, i, xs);
-                    energy += (params.stiffness * settings.thickness * w) as f64;
-                    let cval = (2.0 * w).max(0.0).sqrt();
-                    let r = if xpbd { cval + la[i] / (params.stiffness * c.aniso_scale) } else { cval };
-                    res = res.max((r.abs() / a.area[i].sqrt()) as f64);
-                }
-                [energy, res, 0.0]
-            });
-            aniso = parts.iter().map(|s| s[0]).sum::<f64>();
-            residual = residual.max(parts.iter().fold(0.0f64, |acc, s| acc.max(s[1])));
-        }
-        self.stats.elastic_energy = elastic;
-        self.stats.bending_energy = bending;
-        self.stats.anisotropic_energy = aniso;
-        self.stats.residual = residual;
-    }
-}
-
-#[inline(always)]
-fn bending_stencil(s: &Bendings, i: usize, x: &[Vec3; 4], keep_rest: bool) -> (f32, [Vec3; 4]) {
-    let rest = crate::solver::BendingRest {
-        k: s.k[i],
-        q: s.q[i],
-        rest_local: if keep_rest { s.rest_local[i] } else { Vec3::ZERO },
-    };
-    bending_energy(x, &rest, keep_rest)
 }

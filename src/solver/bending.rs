@@ -126,16 +126,39 @@ pub fn bending_projection(
     }
 }
 
+/// The target `Σ K_i x_i` is compared with, for four stencils (lanes).
+#[derive(Clone, Copy, Debug)]
+pub enum WideTarget<'a> {
+    /// The paper's flat rest: 0.
+    Flat,
+    /// The rest vectors (frame coordinates), carried by each stencil's current frame.
+    Frame(&'a W3),
+    /// Targets already in world space (see [`bending_target`]).
+    Fixed(&'a W3),
+}
+
+/// The rest-preserving target `R Σ K_i X_i` of a stencil at positions `x`: its rest vector in
+/// frame coordinates carried by the current frame (0 when the frame is degenerate, as in
+/// [`bending_residual`]). A solver may evaluate it once per substep and hold it through the
+/// iterations (the frame's rotation lags by at most one substep).
+#[inline(always)]
+pub fn bending_target(x: &[Vec3; 4], rest_local: Vec3) -> Vec3 {
+    match frame(x) {
+        Some([e, n, b]) => e * rest_local.x + n * rest_local.y + b * rest_local.z,
+        None => Vec3::ZERO,
+    }
+}
+
 /// [`bending_residual`] followed by [`bending_projection`] for four stencils at once (lanes).
-/// `x[k]` holds vertex k of every stencil, `k` the coefficients K1..K3, `rest` the rest vectors
-/// (`None`: the paper's flat target). Returns `(v, scale, Δλ, active)`: lane j is to be applied
+/// `x[k]` holds vertex k of every stencil, `k` the coefficients K1..K3, `target` what
+/// `Σ K_i x_i` is compared with. Returns `(v, scale, Δλ, active)`: lane j is to be applied
 /// as `Δx_i = v_j · (w_i K_i · scale_j)` when bit j of `active` is set.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn bending_projection_wide(
     x: &[W3; 4],
     k: [Vec4; 3],
-    rest: Option<&W3>,
+    target: WideTarget,
     q: Vec4,
     wk2: Vec4,
     xpbd: Option<(Vec4, Vec4)>,
@@ -144,7 +167,10 @@ pub fn bending_projection_wide(
 ) -> (W3, Vec4, Vec4, u32) {
     let (d1, d2, d3) = (x[1].sub(x[0]), x[2].sub(x[0]), x[3].sub(x[0]));
     let mut v = d1.scale(k[0]).add(d2.scale(k[1])).add(d3.scale(k[2]));
-    if let Some(r) = rest {
+    if let WideTarget::Fixed(t) = target {
+        v = v.sub(*t);
+    }
+    if let WideTarget::Frame(r) = target {
         let m = d1.cross(d2).add(d3.cross(d1));
         let (l2, m2) = (d1.dot(d1), m.dot(m));
         let valid = l2.cmpgt(Vec4::ZERO) & m2.cmpgt(Vec4::splat(1e-24) * l2 * l2);
@@ -254,7 +280,7 @@ mod tests {
             let (v4, s4, l4, act) = bending_projection_wide(
                 &wx,
                 kk,
-                keep.then_some(&rest),
+                if keep { WideTarget::Frame(&rest) } else { WideTarget::Flat },
                 Vec4::splat(r.q),
                 Vec4::splat(wk2),
                 xp,
@@ -273,6 +299,13 @@ mod tests {
                     None => assert!(act & (1 << j) == 0),
                 }
             }
+        }
+        // A target evaluated beforehand gives the same residual as the frame inside.
+        for st in &stencils {
+            let fixed = bending_target(st, r.rest_local);
+            let direct = bending_residual(st, &r.k, Some(r.rest_local));
+            let held = bending_residual(st, &r.k, None) - fixed;
+            assert!((direct - held).length() <= 1e-6 * direct.length().max(1e-6));
         }
         // Rest-preserving form: the gradient with the frame rotation held fixed.
         let (_, g) = bending_energy(&x, &r, true);

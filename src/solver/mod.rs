@@ -14,7 +14,8 @@ mod triangle;
 mod wide;
 
 pub use bending::{
-    BendingRest, bending_energy, bending_projection, bending_projection_wide, bending_residual, bending_rest,
+    BendingRest, WideTarget, bending_energy, bending_projection, bending_projection_wide, bending_residual,
+    bending_rest, bending_target,
 };
 pub use colouring::colour_constraints;
 pub use distance::distance_correction;

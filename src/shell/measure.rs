@@ -1,0 +1,104 @@
+//! What a step measures after its last iteration (SPEC 4): the energies and the residual.
+//! Sums run in fixed chunks, so they do not depend on the thread count.
+
+#![allow(clippy::needless_range_loop)]
+
+use super::exec::{REDUCE_CHUNK, chunk_partials};
+use super::project::{gather_aniso, membrane_energy_at, stencil_area};
+use super::settings::{BendingKind, ShellSettings, SolverKind};
+use super::simulator::{Coefficients, State};
+use crate::solver::bending_residual;
+
+impl State {
+    /// Energies (J) and the residual after the last iteration: the largest relative constraint
+    /// violation, |C + α̃ λ| for XPBD and |C| for PBD, with C = sqrt(2 Ŵ) made dimensionless
+    /// (divided by √A0 for membrane and anisotropic constraints; bending's C already is).
+    pub(super) fn measure(&mut self, settings: &ShellSettings, c: &Coefficients, parallel: bool) {
+        let k = settings.youngs_modulus * settings.thickness;
+        let xpbd = c.solver == SolverKind::Xpbd;
+        let (x, m, lm) = (&self.x, &self.membranes, &self.lambda_membrane);
+        let parts = &mut self.partials[..m.len().div_ceil(REDUCE_CHUNK)];
+        chunk_partials(parallel, m.len(), parts, |s, e| {
+            let (mut energy, mut residual) = (0.0f64, 0.0f64);
+            for i in s..e {
+                let (w, _) = membrane_energy_at(m, i, x, c);
+                energy += (k * w) as f64;
+                let cval = (2.0 * w).max(0.0).sqrt();
+                let r = if xpbd { cval + c.alpha_membrane * lm[i] } else { cval };
+                residual = residual.max((r.abs() / m.area[i].sqrt()) as f64);
+            }
+            [energy, residual, 0.0]
+        });
+        let elastic = parts.iter().map(|s| s[0]).sum::<f64>();
+        let mut residual = parts.iter().fold(0.0f64, |a, s| a.max(s[1]));
+        if c.solver == SolverKind::PbdDistance {
+            // The distance solver's own constraints: the largest relative edge-length error.
+            let e = &self.edges;
+            let parts = &mut self.partials[..e.len().div_ceil(REDUCE_CHUNK)];
+            chunk_partials(parallel, e.len(), parts, |s, end| {
+                let mut worst = 0.0f64;
+                for i in s..end {
+                    let [a, b] = e.idx[i];
+                    let len = (x[b as usize] - x[a as usize]).length();
+                    worst = worst.max(((len - e.rest[i]) / e.rest[i]).abs() as f64);
+                }
+                [worst, 0.0, 0.0]
+            });
+            residual = parts.iter().fold(0.0f64, |a, s| a.max(s[0]));
+        }
+
+        let mut bending = 0.0;
+        if settings.bending != BendingKind::None {
+            let (b, lb) = (&self.bendings, &self.lambda_bending);
+            let parts = &mut self.partials[..b.len().div_ceil(REDUCE_CHUNK)];
+            chunk_partials(parallel, b.len(), parts, |s, e| {
+                let (mut energy, mut res) = (0.0f64, 0.0f64);
+                for i in s..e {
+                    let t = &b.idx[i];
+                    let xs = [x[t[0] as usize], x[t[1] as usize], x[t[2] as usize], x[t[3] as usize]];
+                    let v = bending_residual(&xs, &b.k[i], c.keep_rest.then(|| b.rest_local[i]));
+                    let w = 0.5 * b.q[i] * v.length_squared();
+                    let stiffness = k * settings.bending_coefficient * stencil_area(b.q[i]);
+                    energy += (stiffness * w) as f64;
+                    let cval = (2.0 * w).max(0.0).sqrt();
+                    let r = if xpbd && stiffness > 0.0 {
+                        cval + lb[i] / (stiffness * settings.time_step.powi(2) / (settings.substeps as f32).powi(2))
+                    } else {
+                        cval
+                    };
+                    res = res.max(r.abs() as f64);
+                }
+                [energy, res, 0.0]
+            });
+            bending = parts.iter().map(|s| s[0]).sum::<f64>();
+            if settings.bending_coefficient > 0.0 {
+                residual = residual.max(parts.iter().fold(0.0f64, |a, s| a.max(s[1])));
+            }
+        }
+
+        let mut aniso = 0.0;
+        if let Some(a) = &self.anisotropics {
+            let la = &self.lambda_aniso;
+            let parts = &mut self.partials[..a.len().div_ceil(REDUCE_CHUNK)];
+            chunk_partials(parallel, a.len(), parts, |s, e| {
+                let (mut energy, mut res) = (0.0f64, 0.0f64);
+                for i in s..e {
+                    let t = &a.tri[i];
+                    let xs = [x[t[0] as usize], x[t[1] as usize], x[t[2] as usize]];
+                    let (w, _, params) = gather_aniso(a, i, xs);
+                    energy += (params.stiffness * settings.thickness * w) as f64;
+                    let cval = (2.0 * w).max(0.0).sqrt();
+                    let r = if xpbd { cval + la[i] / (params.stiffness * c.aniso_scale) } else { cval };
+                    res = res.max((r.abs() / a.area[i].sqrt()) as f64);
+                }
+                [energy, res, 0.0]
+            });
+            aniso = parts.iter().map(|s| s[0]).sum::<f64>();
+            residual = residual.max(parts.iter().fold(0.0f64, |acc, s| acc.max(s[1])));
+        }
+        self.stats.elastic_energy = elastic;
+        self.stats.bending_energy = bending;
+        self.stats.anisotropic_energy = aniso;
+        self.stats.residual = residual;
+    }
+}
