@@ -15,16 +15,17 @@ pub struct CcdSettings {
     /// Most sub-domains the exact stage examines before answering the conservative "hit at the
     /// earliest time not yet ruled out". Bounds the worst-case time of one query.
     pub max_boxes: u32,
-    /// A sub-domain whose gap values span less than this times the extent of the query's points
-    /// (and that still may hold a contact) is reported as a hit. Near misses closer than about
-    /// this relative distance may therefore be reported as hits (false positives), never the
-    /// other way round.
+    /// A sub-domain whose gap values all lie within `tolerance` of the thickness (per axis) is
+    /// reported as a hit, with `tolerance` this times the largest displacement of a point over
+    /// the step (but at least its square times the extent of the points). Near misses closer
+    /// than about that may therefore be reported as hits (false positives), never the other way
+    /// round, and the time of impact is early by at most about this fraction of the step.
     pub relative_tolerance: f64,
 }
 
 impl Default for CcdSettings {
     fn default() -> Self {
-        Self { max_boxes: 2048, relative_tolerance: 1.0 / (1u64 << 30) as f64 }
+        Self { max_boxes: 1024, relative_tolerance: 1.0 / (1u64 << 20) as f64 }
     }
 }
 
