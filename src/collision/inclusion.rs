@@ -132,8 +132,7 @@ fn earliest<B: Domain>(root: B, max_boxes: u32, mut examine: impl FnMut(&B) -> V
     let mut queue = Queue { heap: std::collections::BinaryHeap::new(), slab: Vec::new(), free: Vec::new() };
     let mut next = Some((root, 0u16));
     let mut boxes = 0u32;
-    loop {
-        let Some((domain, depth)) = next.take().or_else(|| queue.pop()) else { break };
+    while let Some((domain, depth)) = next.take().or_else(|| queue.pop()) {
         let t_lo = domain.t_lo();
         if boxes >= max_boxes {
             return Search { toi: Some(queue.open_min(t_lo)), boxes, exhausted: true };
@@ -434,9 +433,9 @@ pub fn edge_edge(start: &[V3; 4], end: &[V3; 4], thickness: f64, relative_tolera
         }
         let mut dim = usize::MAX;
         let mut largest = -1.0;
-        for k in 0..3 {
-            if d.splits[k] < MAX_SPLITS && variation[k] > largest {
-                largest = variation[k];
+        for (k, &change) in variation.iter().enumerate() {
+            if d.splits[k] < MAX_SPLITS && change > largest {
+                largest = change;
                 dim = k;
             }
         }
