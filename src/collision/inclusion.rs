@@ -175,8 +175,9 @@ enum Class {
     Refuted,
     /// Every value is within the tolerance of the thickness: report a contact.
     Near,
-    /// Undecided: split.
-    Open,
+    /// Undecided: split. True for the axes whose values are not all near zero yet: only their
+    /// variation matters when choosing the split.
+    Open([bool; 3]),
 }
 
 impl Bounds {
@@ -202,8 +203,11 @@ impl Bounds {
             }
         }
         // Relative to the motion, so that the answer's time is accurate whatever the scale of the
-        // motion, but not below a far smaller fraction of the extent (static near contacts).
-        let tolerance = (motion * relative_tolerance).max(extent * relative_tolerance * relative_tolerance);
+        // motion, but not below a far smaller fraction of the extent (static near contacts), nor
+        // below 1/64 of the thickness: with a thickness the contact set is a volume, and
+        // resolving its boundary much finer than the thickness itself only costs time.
+        let tolerance =
+            (motion * relative_tolerance).max(extent * relative_tolerance * relative_tolerance).max(thickness / 64.0);
         // The tolerance is at least the error bound: below it nothing can be resolved anyway.
         let near = std::array::from_fn(|axis| threshold[axis] + tolerance.max(error[axis]));
         Self { threshold, near }
@@ -211,7 +215,7 @@ impl Bounds {
 
     #[inline(always)]
     fn classify(&self, corners: &[V3]) -> Class {
-        let mut near = true;
+        let mut open = [false; 3];
         for axis in 0..3 {
             let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
             for c in corners {
@@ -221,15 +225,22 @@ impl Bounds {
             if lo > self.threshold[axis] || hi < -self.threshold[axis] {
                 return Class::Refuted;
             }
-            near &= lo >= -self.near[axis] && hi <= self.near[axis];
+            open[axis] = lo < -self.near[axis] || hi > self.near[axis];
         }
-        if near { Class::Near } else { Class::Open }
+        if open.iter().any(|&o| o) { Class::Open(open) } else { Class::Near }
     }
 }
 
+/// Largest change between two corners over the open axes.
 #[inline(always)]
-fn max_abs_diff(a: &V3, b: &V3) -> f64 {
-    (a[0] - b[0]).abs().max((a[1] - b[1]).abs()).max((a[2] - b[2]).abs())
+fn max_abs_diff(a: &V3, b: &V3, open: &[bool; 3]) -> f64 {
+    let mut change = 0.0f64;
+    for axis in 0..3 {
+        if open[axis] {
+            change = change.max((a[axis] - b[axis]).abs());
+        }
+    }
+    change
 }
 
 #[inline(always)]
@@ -318,11 +329,11 @@ pub fn vertex_triangle(
         let s0 = slice(d.t[0], &d.q);
         let s1 = slice(d.t[1], &d.q);
         let corners = [s0[0], s0[1], s0[2], s1[0], s1[1], s1[2]];
-        match bounds.classify(&corners) {
+        let open = match bounds.classify(&corners) {
             Class::Refuted => return Verdict::Refuted,
             Class::Near => return Verdict::Leaf,
-            Class::Open => {}
-        }
+            Class::Open(open) => open,
+        };
         let can_split_t = d.t_splits < MAX_SPLITS;
         let can_split_q = d.q_splits < MAX_SPLITS;
         let mid = 0.5 * (d.t[0] + d.t[1]);
@@ -334,13 +345,13 @@ pub fn vertex_triangle(
                 return verdict;
             }
         }
-        let along_t = (0..3).map(|i| max_abs_diff(&s1[i], &s0[i])).fold(0.0, f64::max);
+        let along_t = (0..3).map(|i| max_abs_diff(&s1[i], &s0[i], &open)).fold(0.0, f64::max);
         // Side k joins corners k and k+1 (mod 3).
         let mut side = 0;
         let mut along_side = -1.0;
         for k in 0..3 {
             let l = (k + 1) % 3;
-            let variation = max_abs_diff(&s0[k], &s0[l]).max(max_abs_diff(&s1[k], &s1[l]));
+            let variation = max_abs_diff(&s0[k], &s0[l], &open).max(max_abs_diff(&s1[k], &s1[l], &open));
             if variation > along_side {
                 along_side = variation;
                 side = k;
@@ -410,11 +421,11 @@ pub fn edge_edge(start: &[V3; 4], end: &[V3; 4], thickness: f64, relative_tolera
         let s0 = slice(t[0], u, v);
         let s1 = slice(t[1], u, v);
         let corners = [s0[0], s0[1], s0[2], s0[3], s1[0], s1[1], s1[2], s1[3]];
-        match bounds.classify(&corners) {
+        let open = match bounds.classify(&corners) {
             Class::Refuted => return Verdict::Refuted,
             Class::Near => return Verdict::Leaf,
-            Class::Open => {}
-        }
+            Class::Open(open) => open,
+        };
         if d.splits[0] < MAX_SPLITS {
             let (early, late) = d.halved(0);
             let sm = slice(early.range[0][1], u, v);
@@ -425,11 +436,11 @@ pub fn edge_edge(start: &[V3; 4], end: &[V3; 4], thickness: f64, relative_tolera
         // Variation of F along each parameter: the largest change over the four parallel edges.
         let mut variation = [0.0f64; 3];
         for n in 0..4 {
-            variation[0] = variation[0].max(max_abs_diff(&s0[n], &s1[n]));
+            variation[0] = variation[0].max(max_abs_diff(&s0[n], &s1[n], &open));
         }
         for s in [&s0, &s1] {
-            variation[1] = variation[1].max(max_abs_diff(&s[0], &s[2])).max(max_abs_diff(&s[1], &s[3]));
-            variation[2] = variation[2].max(max_abs_diff(&s[0], &s[1])).max(max_abs_diff(&s[2], &s[3]));
+            variation[1] = variation[1].max(max_abs_diff(&s[0], &s[2], &open)).max(max_abs_diff(&s[1], &s[3], &open));
+            variation[2] = variation[2].max(max_abs_diff(&s[0], &s[1], &open)).max(max_abs_diff(&s[2], &s[3], &open));
         }
         let mut dim = usize::MAX;
         let mut largest = -1.0;
