@@ -30,8 +30,10 @@ impl Aabb {
             }
         }
         for axis in 0..3 {
-            b.min[axis] = b.min[axis] - margin - b.min[axis].abs() * (4.0 * f64::EPSILON);
-            b.max[axis] = b.max[axis] + margin + b.max[axis].abs() * (4.0 * f64::EPSILON);
+            // The slack (4 eps of |coordinate| + margin) covers the two roundings below.
+            let grow = |x: f64| margin + (x.abs() + margin) * (4.0 * f64::EPSILON);
+            b.min[axis] -= grow(b.min[axis]);
+            b.max[axis] += grow(b.max[axis]);
         }
         b
     }

@@ -201,6 +201,16 @@ mod tests {
         broad.candidates(&edges, &tris, &mut found);
         assert_eq!(found, brute_force(&x, &x1, &edges, &tris, 0.0));
         assert!(found.vertex_face.contains(&(3, 0)) && found.vertex_face.contains(&(0, 1)));
+        // A gap of exactly the thickness still gives candidates (boxes grown with rounding slack).
+        let gap = 0.1;
+        let x2: Vec<V3> =
+            x.iter().enumerate().map(|(i, p)| if i >= 3 { [p[0] - 4.0 + gap, p[1], p[2]] } else { *p }).collect();
+        let broad = MeshBroadPhase::new(&x2, &x2, &edges, &tris, gap);
+        broad.candidates(&edges, &tris, &mut found);
+        assert!(found.vertex_face.contains(&(3, 0)), "{found:?}");
+        let broad = MeshBroadPhase::new(&x2, &x2, &edges, &tris, 0.99 * gap);
+        broad.candidates(&edges, &tris, &mut found);
+        assert_eq!(found, Candidates::default());
     }
 
     #[test]
