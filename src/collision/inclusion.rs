@@ -217,10 +217,15 @@ impl Bounds {
     fn classify(&self, corners: &[V3]) -> Class {
         let mut open = [false; 3];
         for axis in 0..3 {
-            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for c in corners {
-                lo = lo.min(c[axis]);
-                hi = hi.max(c[axis]);
+            // Plain comparisons (no NaN can occur: the caller bounds the coordinates).
+            let (mut lo, mut hi) = (corners[0][axis], corners[0][axis]);
+            for c in &corners[1..] {
+                if c[axis] < lo {
+                    lo = c[axis];
+                }
+                if c[axis] > hi {
+                    hi = c[axis];
+                }
             }
             if lo > self.threshold[axis] || hi < -self.threshold[axis] {
                 return Class::Refuted;
@@ -236,8 +241,9 @@ impl Bounds {
 fn max_abs_diff(a: &V3, b: &V3, open: &[bool; 3]) -> f64 {
     let mut change = 0.0f64;
     for axis in 0..3 {
-        if open[axis] {
-            change = change.max((a[axis] - b[axis]).abs());
+        let d = (a[axis] - b[axis]).abs();
+        if open[axis] && d > change {
+            change = d;
         }
     }
     change
