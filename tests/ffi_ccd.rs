@@ -118,6 +118,19 @@ fn public_queries_have_no_false_negatives() {
 }
 
 #[test]
+fn a_thickness_never_loses_a_hit() {
+    // (Both times of impact are conservative lower bounds, so they need not be ordered.)
+    for category in &load_all() {
+        for (index, q) in category.queries.iter().enumerate() {
+            if query(category.kind, &q.start, &q.end, 0.0).is_some() {
+                let thick = query(category.kind, &q.start, &q.end, 1e-6);
+                assert!(thick.is_some(), "{} #{index}: a thickness lost a hit", category.name);
+            }
+        }
+    }
+}
+
+#[test]
 fn rational_coordinates_are_parsed_exactly() {
     assert_eq!(ccd_queries::exact_rational("3", "4"), 0.75);
     assert_eq!(ccd_queries::exact_rational("-1", "2596148429267413814265248164610048"), -(2f64.powi(-111)));

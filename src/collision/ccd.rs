@@ -15,16 +15,18 @@ pub struct CcdSettings {
     /// Most sub-domains the exact stage examines before answering the conservative "hit at the
     /// earliest time not yet ruled out". Bounds the worst-case time of one query.
     pub max_boxes: u32,
-    /// A sub-domain whose gap values span less than this times the extent of the query's points
-    /// (and that still may hold a contact) is reported as a hit. Near misses closer than about
-    /// this relative distance may therefore be reported as hits (false positives), never the
-    /// other way round.
+    /// A sub-domain whose gap values all lie within `tolerance` of the thickness (per axis) is
+    /// reported as a hit, with `tolerance` this times the largest displacement of a point over
+    /// the step (but at least its square times the extent of the points, and at least 1/64 of
+    /// the thickness). Near misses closer
+    /// than about that may therefore be reported as hits (false positives), never the other way
+    /// round, and the time of impact is early by at most about this fraction of the step.
     pub relative_tolerance: f64,
 }
 
 impl Default for CcdSettings {
     fn default() -> Self {
-        Self { max_boxes: 2048, relative_tolerance: 1.0 / (1u64 << 30) as f64 }
+        Self { max_boxes: 1024, relative_tolerance: 1.0 / (1u64 << 20) as f64 }
     }
 }
 
@@ -253,6 +255,25 @@ mod tests {
         let toi = outcome.toi.expect("crosses the hypotenuse");
         // Reaches the hypotenuse x + y = 1 when 2 - 2 s = 0.4, s = 0.8.
         assert!(toi <= 0.8 && toi > 0.8 - 1e-6, "{outcome:?}");
+    }
+
+    #[test]
+    fn thick_contacts_are_found_early_enough_within_the_budget() {
+        // The vertex passes 0.1/sqrt(2) from the hypotenuse; in the max-norm it comes within
+        // `thickness` of the triangle when |z| <= thickness, at t = (1 - thickness) / 2.
+        let tri = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let start = [[0.55, 0.55, 1.0], tri[0], tri[1], tri[2]];
+        let end = [[0.55, 0.55, -1.0], tri[0], tri[1], tri[2]];
+        for thickness in [0.05, 0.1, 0.2] {
+            let outcome = vertex_triangle_with(&start, &end, thickness, &CcdSettings::default());
+            assert_eq!(outcome.stage, Stage::Inclusion, "{outcome:?}");
+            assert!(outcome.boxes < 400, "{outcome:?}");
+            let expected = (1.0 - thickness) / 2.0;
+            let toi = outcome.toi.unwrap();
+            // Early by at most the tolerance (thickness / 64) over the speed (2), plus a bucket.
+            assert!(toi <= expected && toi >= expected - thickness / 128.0 - 1e-6, "{thickness}: {toi}");
+        }
+        assert_eq!(vertex_triangle(&start, &end, 0.03), None, "0.07 away in the max-norm");
     }
 
     #[test]

@@ -10,10 +10,11 @@
 //! A domain whose box misses `[-thickness, thickness]^3` on some axis cannot hold a contact (the
 //! max-norm is at most the Euclidean norm, so this is conservative). The others are bisected.
 //!
-//! Search order and answer: best first by the domain's lower time bound (ties: deeper first).
-//! The first domain popped that may hold a contact and is small enough to stop splitting (a
-//! "leaf") gives the answer, its lower time bound: every point (t, u, v) with a contact lies in
-//! a domain still queued, so no contact is earlier. The number of domains examined is capped;
+//! Search order and answer: best first by the domain's lower time bound rounded down to 2^-20
+//! (ties: deeper first). The first domain popped whose values all lie within a small tolerance
+//! of the thickness (a "leaf": a near contact certainly exists there) ends the search; the
+//! answer is the smallest lower time bound among it and the domains still queued: every point
+//! (t, u, v) with a contact lies in a domain still queued, so no contact is earlier. The number of domains examined is capped;
 //! when the cap is reached the answer is a hit at the smallest lower time bound still open,
 //! which is conservative too.
 //!
@@ -50,61 +51,109 @@ enum Verdict<B> {
     Refuted,
     /// Small enough: report a possible contact at its lower time bound.
     Leaf,
-    /// Examine both halves, the first one first.
+    /// Examine both halves.
     Split(B, B),
+    /// Only this part can hold a contact (the rest was refuted).
+    Only(B),
 }
 
 trait Domain: Copy {
     fn t_lo(&self) -> f64;
 }
 
-/// A domain waiting in the queue: earlier start first, then deeper first (so that among domains
-/// that start at the same time the search goes depth first and the queue stays short).
-struct Queued<B> {
-    t_lo: f64,
-    depth: u16,
-    domain: B,
+/// Number of time buckets of the queue: 2^20 (a bucket is about 1e-6 of the step).
+const TIME_BUCKETS: f64 = (1u64 << 20) as f64;
+const SLOT_BITS: u32 = 27;
+const DEPTH_BITS: u32 = 16;
+/// Most domains examined by one query, whatever the settings (the queue's slot index has
+/// SLOT_BITS bits and holds at most two domains per examined one).
+pub(crate) const MAX_BOXES_LIMIT: u32 = 1 << (SLOT_BITS - 2);
+
+/// Queue key of a domain, a max-heap order: earlier time bucket first, then deeper first.
+/// Within one bucket the search thus goes depth first, which finds a leaf after a number of
+/// steps proportional to the depth instead of refining every domain that starts within 1e-6 of
+/// the contact (the cause of slow queries in a purely time-ordered search on degenerate contacts
+/// such as overlapping collinear edges).
+#[inline(always)]
+fn key(bucket: u64, depth: u16, slot: usize) -> u64 {
+    (((1u64 << 21) - 1 - bucket) << (DEPTH_BITS + SLOT_BITS)) | (u64::from(depth) << SLOT_BITS) | slot as u64
 }
 
-impl<B> PartialEq for Queued<B> {
-    fn eq(&self, other: &Self) -> bool {
-        self.cmp(other) == std::cmp::Ordering::Equal
-    }
+#[inline(always)]
+fn bucket_of(t_lo: f64) -> u64 {
+    // t_lo is in [0, 1]: at most 2^20.
+    (t_lo * TIME_BUCKETS) as u64
 }
-impl<B> Eq for Queued<B> {}
-impl<B> PartialOrd for Queued<B> {
-    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(other))
-    }
+
+/// The queue: keys in a binary heap, domains in a slab reused through a free list (moving 8-byte
+/// keys instead of whole domains).
+struct Queue<B> {
+    heap: std::collections::BinaryHeap<u64>,
+    slab: Vec<B>,
+    free: Vec<u32>,
 }
-impl<B> Ord for Queued<B> {
-    /// Max-heap order: the greatest is popped first.
-    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        other.t_lo.total_cmp(&self.t_lo).then(self.depth.cmp(&other.depth))
+
+impl<B: Domain> Queue<B> {
+    fn push(&mut self, domain: B, depth: u16) {
+        let slot = match self.free.pop() {
+            Some(slot) => {
+                self.slab[slot as usize] = domain;
+                slot as usize
+            }
+            None => {
+                self.slab.push(domain);
+                self.slab.len() - 1
+            }
+        };
+        self.heap.push(key(bucket_of(domain.t_lo()), depth, slot));
+    }
+
+    fn pop(&mut self) -> Option<(B, u16)> {
+        let key = self.heap.pop()?;
+        let slot = (key & ((1 << SLOT_BITS) - 1)) as usize;
+        self.free.push(slot as u32);
+        Some((self.slab[slot], ((key >> SLOT_BITS) & ((1 << DEPTH_BITS) - 1)) as u16))
+    }
+
+    /// Smallest start time among `t` and the queued domains.
+    fn open_min(&self, t: f64) -> f64 {
+        self.heap.iter().map(|&key| self.slab[(key & ((1 << SLOT_BITS) - 1)) as usize].t_lo()).fold(t, f64::min)
     }
 }
 
-/// Best-first search over domains by their lower time bound. The first domain popped that is
-/// small enough and not refuted gives the answer: every contact earlier than its start would lie
-/// in a domain still queued, which would start earlier and so would have been popped first.
+/// Best-first search over domains by their time bucket. When a leaf is found (or the budget runs
+/// out), the answer is the smallest lower time bound among it and every domain still queued:
+/// every contact lies in a queued domain or in a refuted one (impossible), so none is earlier.
+/// Domains are taken in bucket order, so the answer is at most one bucket (2^-20) earlier than
+/// the leaf's start. A child in the bucket of its parent would be taken next anyway (it is the
+/// deepest), so it is examined at once without a trip through the queue.
 fn earliest<B: Domain>(root: B, max_boxes: u32, mut examine: impl FnMut(&B) -> Verdict<B>) -> Search {
-    let mut queue = std::collections::BinaryHeap::with_capacity(64);
-    queue.push(Queued { t_lo: root.t_lo(), depth: 0, domain: root });
+    let max_boxes = max_boxes.min(MAX_BOXES_LIMIT);
+    let mut queue = Queue { heap: std::collections::BinaryHeap::new(), slab: Vec::new(), free: Vec::new() };
+    let mut next = Some((root, 0u16));
     let mut boxes = 0u32;
-    while let Some(Queued { t_lo, depth, domain }) = queue.pop() {
+    while let Some((domain, depth)) = next.take().or_else(|| queue.pop()) {
+        let t_lo = domain.t_lo();
         if boxes >= max_boxes {
-            // `t_lo` is the smallest start still open: nothing earlier was ruled in.
-            return Search { toi: Some(t_lo), boxes, exhausted: true };
+            return Search { toi: Some(queue.open_min(t_lo)), boxes, exhausted: true };
         }
         boxes += 1;
+        let bucket = bucket_of(t_lo);
+        let mut follow = |child: B, queue: &mut Queue<B>| {
+            if bucket_of(child.t_lo()) == bucket {
+                next = Some((child, depth + 1));
+            } else {
+                queue.push(child, depth + 1);
+            }
+        };
         match examine(&domain) {
             Verdict::Refuted => {}
-            Verdict::Leaf => return Search { toi: Some(t_lo), boxes, exhausted: false },
+            Verdict::Leaf => return Search { toi: Some(queue.open_min(t_lo)), boxes, exhausted: false },
             Verdict::Split(first, second) => {
-                for half in [first, second] {
-                    queue.push(Queued { t_lo: half.t_lo(), depth: depth + 1, domain: half });
-                }
+                queue.push(second, depth + 1);
+                follow(first, &mut queue);
             }
+            Verdict::Only(part) => follow(part, &mut queue),
         }
     }
     Search { toi: None, boxes, exhausted: false }
@@ -112,16 +161,32 @@ fn earliest<B: Domain>(root: B, max_boxes: u32, mut examine: impl FnMut(&B) -> V
 
 /// Per-axis acceptance thresholds and the leaf size shared by both queries.
 struct Bounds {
+    /// |F| above this on an axis (thickness plus the rounding-error bound) rules a contact out.
     threshold: V3,
-    leaf_width: f64,
+    /// A domain whose values all lie within this of zero on every axis is a leaf: a contact
+    /// within the tolerance certainly exists there (or the thickness is nearly reached).
+    near: V3,
+}
+
+/// What the box of the corner values says about a domain.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Class {
+    /// Certainly no contact.
+    Refuted,
+    /// Every value is within the tolerance of the thickness: report a contact.
+    Near,
+    /// Undecided: split. True for the axes whose values are not all near zero yet: only their
+    /// variation matters when choosing the split.
+    Open([bool; 3]),
 }
 
 impl Bounds {
-    /// `points` are the eight inputs (four at t = 0, four at t = 1).
+    /// `start` and `end` are the four points at t = 0 and t = 1.
     fn new(start: &[V3; 4], end: &[V3; 4], thickness: f64, relative_tolerance: f64) -> Self {
         let mut threshold = [0.0; 3];
-        let mut largest_error = 0.0f64;
+        let mut error = [0.0; 3];
         let mut extent = 0.0f64;
+        let mut motion = 0.0f64;
         for axis in 0..3 {
             let (mut lo, mut hi, mut magnitude) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
             for p in start.iter().chain(end.iter()) {
@@ -129,38 +194,59 @@ impl Bounds {
                 hi = hi.max(p[axis]);
                 magnitude = magnitude.max(p[axis].abs());
             }
-            let error = 64.0 * U * magnitude + UNDERFLOW_SLACK;
+            error[axis] = 64.0 * U * magnitude + UNDERFLOW_SLACK;
             // (thickness + error) rounded up: the relative 4 eps covers the two roundings.
-            threshold[axis] = (thickness + error) * (1.0 + 4.0 * f64::EPSILON);
-            largest_error = largest_error.max(error);
+            threshold[axis] = (thickness + error[axis]) * (1.0 + 4.0 * f64::EPSILON);
             extent = extent.max(hi - lo);
+            for (p, q) in start.iter().zip(end.iter()) {
+                motion = motion.max((q[axis] - p[axis]).abs());
+            }
         }
-        let leaf_width = (extent * relative_tolerance).max(largest_error);
-        Self { threshold, leaf_width }
+        // Relative to the motion, so that the answer's time is accurate whatever the scale of the
+        // motion, but not below a far smaller fraction of the extent (static near contacts), nor
+        // below 1/64 of the thickness: with a thickness the contact set is a volume, and
+        // resolving its boundary much finer than the thickness itself only costs time.
+        let tolerance =
+            (motion * relative_tolerance).max(extent * relative_tolerance * relative_tolerance).max(thickness / 64.0);
+        // The tolerance is at least the error bound: below it nothing can be resolved anyway.
+        let near = std::array::from_fn(|axis| threshold[axis] + tolerance.max(error[axis]));
+        Self { threshold, near }
     }
 
-    /// Box of the corner values per axis: refuted, or its largest width.
     #[inline(always)]
-    fn classify(&self, corners: &[V3]) -> Option<f64> {
-        let mut width = 0.0f64;
+    fn classify(&self, corners: &[V3]) -> Class {
+        let mut open = [false; 3];
         for axis in 0..3 {
-            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for c in corners {
-                lo = lo.min(c[axis]);
-                hi = hi.max(c[axis]);
+            // Plain comparisons (no NaN can occur: the caller bounds the coordinates).
+            let (mut lo, mut hi) = (corners[0][axis], corners[0][axis]);
+            for c in &corners[1..] {
+                if c[axis] < lo {
+                    lo = c[axis];
+                }
+                if c[axis] > hi {
+                    hi = c[axis];
+                }
             }
             if lo > self.threshold[axis] || hi < -self.threshold[axis] {
-                return None;
+                return Class::Refuted;
             }
-            width = width.max(hi - lo);
+            open[axis] = lo < -self.near[axis] || hi > self.near[axis];
         }
-        Some(width)
+        if open.iter().any(|&o| o) { Class::Open(open) } else { Class::Near }
     }
 }
 
+/// Largest change between two corners over the open axes.
 #[inline(always)]
-fn max_abs_diff(a: &V3, b: &V3) -> f64 {
-    (a[0] - b[0]).abs().max((a[1] - b[1]).abs()).max((a[2] - b[2]).abs())
+fn max_abs_diff(a: &V3, b: &V3, open: &[bool; 3]) -> f64 {
+    let mut change = 0.0f64;
+    for axis in 0..3 {
+        let d = (a[axis] - b[axis]).abs();
+        if open[axis] && d > change {
+            change = d;
+        }
+    }
+    change
 }
 
 #[inline(always)]
@@ -194,6 +280,33 @@ impl Domain for VfDomain {
     }
 }
 
+/// Classifies the two halves in time of a domain whose corner values at its start, middle and
+/// end times are `early`, `middle`, `late` (each a slice of N corners). Dropping a refuted half
+/// before any split in space keeps the domains that later split in space close to the first
+/// contact time, so a contact along a whole edge or face does not multiply them.
+#[inline(always)]
+fn halves<const N: usize>(bounds: &Bounds, early: &[V3; N], middle: &[V3; N], late: &[V3; N]) -> (Class, Class) {
+    let mut first = [[0.0; 3]; 8];
+    let mut second = [[0.0; 3]; 8];
+    first[..N].copy_from_slice(early);
+    first[N..2 * N].copy_from_slice(middle);
+    second[..N].copy_from_slice(middle);
+    second[N..2 * N].copy_from_slice(late);
+    (bounds.classify(&first[..2 * N]), bounds.classify(&second[..2 * N]))
+}
+
+/// Outcome of the time-halving test; `None` when both halves stay open.
+#[inline(always)]
+fn time_verdict<B>(halves: (Class, Class), early: B, late: B) -> Option<Verdict<B>> {
+    match halves {
+        (Class::Refuted, Class::Refuted) => Some(Verdict::Refuted),
+        (Class::Near, _) => Some(Verdict::Leaf),
+        (Class::Refuted, _) => Some(Verdict::Only(late)),
+        (_, Class::Refuted) => Some(Verdict::Only(early)),
+        _ => None,
+    }
+}
+
 /// Earliest time at which vertex `p` can be within `thickness` of triangle `abc` (max-norm, so
 /// conservative for the Euclidean distance). `start = [p, a, b, c]` at t = 0, `end` at t = 1.
 /// Coordinates must be finite and at most 2^1000 in magnitude (checked by the caller).
@@ -206,44 +319,51 @@ pub fn vertex_triangle(
 ) -> Search {
     let bounds = Bounds::new(start, end, thickness, relative_tolerance);
     let delta = deltas(start, end);
+    // Gap values at time t at the three corners of the parameter triangle q.
+    let slice = |t: f64, q: &[[f64; 2]; 3]| -> [V3; 3] {
+        let [p, a, b, c] = lerp_points(start, &delta, t);
+        let pa = sub(&p, &a);
+        let ba = sub(&b, &a);
+        let ca = sub(&c, &a);
+        std::array::from_fn(|i| {
+            let [u, v] = q[i];
+            std::array::from_fn(|axis| (pa[axis] - u * ba[axis]) - v * ca[axis])
+        })
+    };
     let root = VfDomain { t: [0.0, 1.0], q: [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], t_splits: 0, q_splits: 0 };
     earliest(root, max_boxes, |d| {
-        // corners[j * 3 + i]: time t[j], triangle corner q[i].
-        let mut corners = [[0.0; 3]; 6];
-        for j in 0..2 {
-            let [p, a, b, c] = lerp_points(start, &delta, d.t[j]);
-            let pa = sub(&p, &a);
-            let ba = sub(&b, &a);
-            let ca = sub(&c, &a);
-            for i in 0..3 {
-                let [u, v] = d.q[i];
-                for axis in 0..3 {
-                    corners[j * 3 + i][axis] = (pa[axis] - u * ba[axis]) - v * ca[axis];
-                }
+        let s0 = slice(d.t[0], &d.q);
+        let s1 = slice(d.t[1], &d.q);
+        let corners = [s0[0], s0[1], s0[2], s1[0], s1[1], s1[2]];
+        let open = match bounds.classify(&corners) {
+            Class::Refuted => return Verdict::Refuted,
+            Class::Near => return Verdict::Leaf,
+            Class::Open(open) => open,
+        };
+        let can_split_t = d.t_splits < MAX_SPLITS;
+        let can_split_q = d.q_splits < MAX_SPLITS;
+        let mid = 0.5 * (d.t[0] + d.t[1]);
+        let early = VfDomain { t: [d.t[0], mid], t_splits: d.t_splits + 1, ..*d };
+        let late = VfDomain { t: [mid, d.t[1]], t_splits: d.t_splits + 1, ..*d };
+        if can_split_t {
+            let sm = slice(mid, &d.q);
+            if let Some(verdict) = time_verdict(halves(&bounds, &s0, &sm, &s1), early, late) {
+                return verdict;
             }
         }
-        let Some(width) = bounds.classify(&corners) else { return Verdict::Refuted };
-        if width <= bounds.leaf_width {
-            return Verdict::Leaf;
-        }
-        let along_t = (0..3).map(|i| max_abs_diff(&corners[3 + i], &corners[i])).fold(0.0, f64::max);
+        let along_t = (0..3).map(|i| max_abs_diff(&s1[i], &s0[i], &open)).fold(0.0, f64::max);
         // Side k joins corners k and k+1 (mod 3).
         let mut side = 0;
         let mut along_side = -1.0;
         for k in 0..3 {
             let l = (k + 1) % 3;
-            let variation = max_abs_diff(&corners[k], &corners[l]).max(max_abs_diff(&corners[3 + k], &corners[3 + l]));
+            let variation = max_abs_diff(&s0[k], &s0[l], &open).max(max_abs_diff(&s1[k], &s1[l], &open));
             if variation > along_side {
                 along_side = variation;
                 side = k;
             }
         }
-        let can_split_t = d.t_splits < MAX_SPLITS;
-        let can_split_q = d.q_splits < MAX_SPLITS;
         if can_split_t && (along_t >= along_side || !can_split_q) {
-            let mid = 0.5 * (d.t[0] + d.t[1]);
-            let early = VfDomain { t: [d.t[0], mid], t_splits: d.t_splits + 1, ..*d };
-            let late = VfDomain { t: [mid, d.t[1]], t_splits: d.t_splits + 1, ..*d };
             Verdict::Split(early, late)
         } else if can_split_q {
             let (k, l, o) = (side, (side + 1) % 3, (side + 2) % 3);
@@ -271,62 +391,75 @@ impl Domain for EeDomain {
     }
 }
 
+impl EeDomain {
+    fn halved(&self, dim: usize) -> (Self, Self) {
+        let [lo, hi] = self.range[dim];
+        let mid = 0.5 * (lo + hi);
+        let mut first = *self;
+        let mut second = *self;
+        first.range[dim] = [lo, mid];
+        second.range[dim] = [mid, hi];
+        first.splits[dim] += 1;
+        second.splits[dim] += 1;
+        (first, second)
+    }
+}
+
 /// Earliest time at which edge `ab` can be within `thickness` of edge `cd` (max-norm, so
 /// conservative for the Euclidean distance). `start = [a, b, c, d]` at t = 0, `end` at t = 1.
 /// Coordinates must be finite and at most 2^1000 in magnitude (checked by the caller).
 pub fn edge_edge(start: &[V3; 4], end: &[V3; 4], thickness: f64, relative_tolerance: f64, max_boxes: u32) -> Search {
     let bounds = Bounds::new(start, end, thickness, relative_tolerance);
     let delta = deltas(start, end);
+    // Gap values at time t at the four corners (u, v) of the box, index 2 i + k.
+    let slice = |t: f64, u: [f64; 2], v: [f64; 2]| -> [V3; 4] {
+        let [a, b, c, e] = lerp_points(start, &delta, t);
+        let ba = sub(&b, &a);
+        let dc = sub(&e, &c);
+        std::array::from_fn(|n| {
+            let (u, v) = (u[n >> 1], v[n & 1]);
+            std::array::from_fn(|axis| (a[axis] + u * ba[axis]) - (c[axis] + v * dc[axis]))
+        })
+    };
     let root = EeDomain { range: [[0.0, 1.0]; 3], splits: [0; 3] };
     earliest(root, max_boxes, |d| {
-        // corners[4 j + 2 i + k]: time range[0][j], u = range[1][i], v = range[2][k].
-        let mut corners = [[0.0; 3]; 8];
-        for j in 0..2 {
-            let [a, b, c, e] = lerp_points(start, &delta, d.range[0][j]);
-            let ba = sub(&b, &a);
-            let dc = sub(&e, &c);
-            for i in 0..2 {
-                let u = d.range[1][i];
-                for k in 0..2 {
-                    let v = d.range[2][k];
-                    for axis in 0..3 {
-                        corners[4 * j + 2 * i + k][axis] = (a[axis] + u * ba[axis]) - (c[axis] + v * dc[axis]);
-                    }
-                }
+        let [t, u, v] = d.range;
+        let s0 = slice(t[0], u, v);
+        let s1 = slice(t[1], u, v);
+        let corners = [s0[0], s0[1], s0[2], s0[3], s1[0], s1[1], s1[2], s1[3]];
+        let open = match bounds.classify(&corners) {
+            Class::Refuted => return Verdict::Refuted,
+            Class::Near => return Verdict::Leaf,
+            Class::Open(open) => open,
+        };
+        if d.splits[0] < MAX_SPLITS {
+            let (early, late) = d.halved(0);
+            let sm = slice(early.range[0][1], u, v);
+            if let Some(verdict) = time_verdict(halves(&bounds, &s0, &sm, &s1), early, late) {
+                return verdict;
             }
-        }
-        let Some(width) = bounds.classify(&corners) else { return Verdict::Refuted };
-        if width <= bounds.leaf_width {
-            return Verdict::Leaf;
         }
         // Variation of F along each parameter: the largest change over the four parallel edges.
         let mut variation = [0.0f64; 3];
-        for n in 0..8 {
-            for (dim, stride) in [4usize, 2, 1].into_iter().enumerate() {
-                if n & stride == 0 {
-                    variation[dim] = variation[dim].max(max_abs_diff(&corners[n], &corners[n + stride]));
-                }
-            }
+        for n in 0..4 {
+            variation[0] = variation[0].max(max_abs_diff(&s0[n], &s1[n], &open));
+        }
+        for s in [&s0, &s1] {
+            variation[1] = variation[1].max(max_abs_diff(&s[0], &s[2], &open)).max(max_abs_diff(&s[1], &s[3], &open));
+            variation[2] = variation[2].max(max_abs_diff(&s[0], &s[1], &open)).max(max_abs_diff(&s[2], &s[3], &open));
         }
         let mut dim = usize::MAX;
         let mut largest = -1.0;
-        for k in 0..3 {
-            if d.splits[k] < MAX_SPLITS && variation[k] > largest {
-                largest = variation[k];
+        for (k, &change) in variation.iter().enumerate() {
+            if d.splits[k] < MAX_SPLITS && change > largest {
+                largest = change;
                 dim = k;
             }
         }
         if dim == usize::MAX {
             return Verdict::Leaf;
         }
-        let [lo, hi] = d.range[dim];
-        let mid = 0.5 * (lo + hi);
-        let mut first = *d;
-        let mut second = *d;
-        first.range[dim] = [lo, mid];
-        second.range[dim] = [mid, hi];
-        first.splits[dim] += 1;
-        second.splits[dim] += 1;
+        let (first, second) = d.halved(dim);
         Verdict::Split(first, second)
     })
 }

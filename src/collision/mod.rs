@@ -1,7 +1,8 @@
 //! Collision detection (SPEC 1.6): exact, conservative continuous collision queries in f64.
 //!
-//! Owns the standalone vertex-triangle and edge-edge queries and, later, the broad phase and the
-//! contact constraints of the shell. Knows nothing of the FFI or of any simulator.
+//! Owns the standalone vertex-triangle and edge-edge queries, the broad phase over a moving
+//! triangle mesh ([`bvh`], [`candidates`]) and, later, the contact constraints of the shell.
+//! Knows nothing of the FFI or of any simulator.
 //!
 //! A query runs three stages, cheapest first, each of which may only say "certainly no contact"
 //! or "maybe":
@@ -17,8 +18,12 @@
 //!    first, with a fixed budget of boxes. When the budget runs out the answer is a hit at the
 //!    earliest time not yet ruled out, so the query never misses and never runs long.
 
+pub mod bvh;
+pub mod candidates;
 pub mod ccd;
 pub mod filters;
 pub mod inclusion;
 
+pub use bvh::{Aabb, Bvh};
+pub use candidates::{Candidates, MeshBroadPhase};
 pub use ccd::{CcdOutcome, CcdSettings, Stage, edge_edge, edge_edge_with, vertex_triangle, vertex_triangle_with};

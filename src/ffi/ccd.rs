@@ -58,11 +58,14 @@ fn write_answer(out_hit: *mut i32, out_toi: *mut f64, toi: Option<f64>) {
 ///
 /// On success `*out_hit` is 1 and `*out_toi` the time in [0, 1] at which the distance may first
 /// be <= `thickness`, or `*out_hit` is 0 and `*out_toi` is 1.0 (no contact during the step).
-/// The answer is conservative: a contact is never missed and `*out_toi` is never later than the
-/// true first contact time (at most about 1e-9 of the points' extent too early); a near miss
-/// closer than about 1e-9 of that extent, or any query with a coordinate above 2^1000 in
-/// magnitude, may be reported as a hit. The time per call is bounded (a few hundred
-/// microseconds at worst; typically well under a microsecond).
+/// The answer is conservative: a contact is never missed, and `*out_toi` is never later than the
+/// true first contact time. Usually it is within 1e-6 of the step of a time at which each
+/// coordinate of the gap is already within `thickness` plus a tolerance (the largest of 1e-6 of
+/// the largest displacement of a point, 1e-12 of the points' extent and `thickness` / 64); for
+/// the rare queries that use up the fixed work budget it may be earlier. A near miss within
+/// that tolerance of `thickness` (or within a few units in the last place of the coordinates),
+/// or a query with a coordinate above 2^1000 in magnitude, may be reported as a hit. The time
+/// per call is bounded (about 100 microseconds at worst; typically well under a microsecond).
 ///
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` when a pointer is NULL and
 /// `SOFTSHELL_STATUS_INVALID_ARGUMENT` when a coordinate is NaN or infinite or `thickness` is
@@ -105,10 +108,14 @@ pub unsafe extern "C" fn softshell_ccd_vertex_triangle(
 ///
 /// On success `*out_hit` is 1 and `*out_toi` the time in [0, 1] at which the distance may first
 /// be <= `thickness`, or `*out_hit` is 0 and `*out_toi` is 1.0 (no contact during the step).
-/// The answer is conservative: a contact is never missed and `*out_toi` is never later than the
-/// true first contact time; a near miss closer than about 1e-9 of the points' extent, or any
-/// query with a coordinate above 2^1000 in magnitude, may be reported as a hit. The time per
-/// call is bounded (a few hundred microseconds at worst; typically well under a microsecond).
+/// The answer is conservative: a contact is never missed, and `*out_toi` is never later than the
+/// true first contact time. Usually it is within 1e-6 of the step of a time at which each
+/// coordinate of the gap is already within `thickness` plus a tolerance (the largest of 1e-6 of
+/// the largest displacement of a point, 1e-12 of the points' extent and `thickness` / 64); for
+/// the rare queries that use up the fixed work budget it may be earlier. A near miss within
+/// that tolerance of `thickness` (or within a few units in the last place of the coordinates),
+/// or a query with a coordinate above 2^1000 in magnitude, may be reported as a hit. The time
+/// per call is bounded (about 100 microseconds at worst; typically well under a microsecond).
 ///
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` when a pointer is NULL and
 /// `SOFTSHELL_STATUS_INVALID_ARGUMENT` when a coordinate is NaN or infinite or `thickness` is

@@ -1,0 +1,278 @@
+//! Bounding-volume hierarchy over axis-aligned boxes (SPEC 1.6, "AABB culling"): built top down
+//! by median splits, refit bottom up every step, rebuilt when refitting has made it loose.
+//!
+//! Pure data structure: it knows boxes and primitive indices, nothing of meshes or simulators
+//! (see [`super::candidates`] for the mesh pairs).
+
+use super::filters::V3;
+
+/// An axis-aligned box; `min <= max` on every axis for a non-empty box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Smallest corner.
+    pub min: V3,
+    /// Largest corner.
+    pub max: V3,
+}
+
+impl Aabb {
+    /// The empty box (the identity of [`Aabb::union`]).
+    pub const EMPTY: Aabb = Aabb { min: [f64::INFINITY; 3], max: [f64::NEG_INFINITY; 3] };
+
+    /// The box of a set of points, grown by `margin` plus a few units in the last place of each
+    /// coordinate, so that rounding can never make it smaller than the exact grown box.
+    pub fn around(points: &[V3], margin: f64) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for p in points {
+            for (axis, &x) in p.iter().enumerate() {
+                b.min[axis] = b.min[axis].min(x);
+                b.max[axis] = b.max[axis].max(x);
+            }
+        }
+        for axis in 0..3 {
+            // The slack (4 eps of |coordinate| + margin) covers the two roundings below.
+            let grow = |x: f64| margin + (x.abs() + margin) * (4.0 * f64::EPSILON);
+            b.min[axis] -= grow(b.min[axis]);
+            b.max[axis] += grow(b.max[axis]);
+        }
+        b
+    }
+
+    /// The smallest box holding both.
+    #[inline]
+    pub fn union(&self, other: &Aabb) -> Aabb {
+        Aabb {
+            min: std::array::from_fn(|k| self.min[k].min(other.min[k])),
+            max: std::array::from_fn(|k| self.max[k].max(other.max[k])),
+        }
+    }
+
+    /// Whether the closed boxes share a point (touching counts).
+    #[inline]
+    pub fn overlaps(&self, other: &Aabb) -> bool {
+        (0..3).all(|k| self.min[k] <= other.max[k] && other.min[k] <= self.max[k])
+    }
+
+    /// Half the surface area (0 for an empty or flat box).
+    pub fn half_area(&self) -> f64 {
+        let d: [f64; 3] = std::array::from_fn(|k| (self.max[k] - self.min[k]).max(0.0));
+        d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+    }
+
+    fn centroid(&self, axis: usize) -> f64 {
+        0.5 * (self.min[axis] + self.max[axis])
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    aabb: Aabb,
+    /// Leaf: first index into `order`; internal: left child.
+    a: u32,
+    /// Leaf: one past the last index into `order`; internal: right child.
+    b: u32,
+    leaf: bool,
+}
+
+/// Most primitives in one leaf.
+const LEAF_SIZE: usize = 4;
+
+/// A BVH over primitive boxes `0..n`.
+#[derive(Clone, Debug)]
+pub struct Bvh {
+    /// Nodes in pre-order: every child comes after its parent (refit walks them backwards).
+    nodes: Vec<Node>,
+    /// Primitive indices, grouped by leaf.
+    order: Vec<u32>,
+    /// The current primitive boxes.
+    boxes: Vec<Aabb>,
+    /// Looseness (see [`Bvh::looseness`]) right after the last build.
+    built_looseness: f64,
+}
+
+/// Refitting may make the tree this much looser than when it was built before it is rebuilt.
+pub const REBUILD_LOOSENESS_RATIO: f64 = 1.5;
+
+impl Bvh {
+    /// Builds the tree over `boxes` (primitive i has box `boxes[i]`).
+    pub fn build(boxes: Vec<Aabb>) -> Bvh {
+        let mut bvh = Bvh { nodes: Vec::new(), order: (0..boxes.len() as u32).collect(), boxes, built_looseness: 0.0 };
+        bvh.rebuild();
+        bvh
+    }
+
+    /// Number of primitives.
+    pub fn len(&self) -> usize {
+        self.boxes.len()
+    }
+
+    /// True for a tree over no primitive.
+    pub fn is_empty(&self) -> bool {
+        self.boxes.is_empty()
+    }
+
+    /// The current box of primitive `i`.
+    pub fn primitive_box(&self, i: usize) -> &Aabb {
+        &self.boxes[i]
+    }
+
+    /// Rebuilds the topology of the tree from the current primitive boxes.
+    pub fn rebuild(&mut self) {
+        self.nodes.clear();
+        self.order.clear();
+        self.order.extend(0..self.boxes.len() as u32);
+        if !self.boxes.is_empty() {
+            self.nodes.reserve(2 * self.boxes.len() / LEAF_SIZE + 1);
+            let count = self.boxes.len();
+            self.build_node(0, count);
+        }
+        self.built_looseness = self.looseness();
+    }
+
+    /// Builds the node over `order[begin..end]` and returns its index.
+    fn build_node(&mut self, begin: usize, end: usize) -> u32 {
+        let index = self.nodes.len() as u32;
+        let aabb = self.order[begin..end].iter().fold(Aabb::EMPTY, |acc, &i| acc.union(&self.boxes[i as usize]));
+        self.nodes.push(Node { aabb, a: begin as u32, b: end as u32, leaf: true });
+        if end - begin <= LEAF_SIZE {
+            return index;
+        }
+        // Median split along the longest axis of the centroids' box.
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for &i in &self.order[begin..end] {
+            for axis in 0..3 {
+                let c = self.boxes[i as usize].centroid(axis);
+                lo[axis] = lo[axis].min(c);
+                hi[axis] = hi[axis].max(c);
+            }
+        }
+        let axis = (0..3).max_by(|&x, &y| (hi[x] - lo[x]).total_cmp(&(hi[y] - lo[y]))).unwrap_or(0);
+        let mid = begin + (end - begin) / 2;
+        let boxes = &self.boxes;
+        self.order[begin..end].select_nth_unstable_by(mid - begin, |&x, &y| {
+            boxes[x as usize].centroid(axis).total_cmp(&boxes[y as usize].centroid(axis))
+        });
+        let left = self.build_node(begin, mid);
+        let right = self.build_node(mid, end);
+        self.nodes[index as usize] = Node { aabb, a: left, b: right, leaf: false };
+        index
+    }
+
+    /// Sum of the internal nodes' half areas over that of the primitive boxes: how much empty
+    /// space the tree makes a query visit. Grows when refitting after large motions.
+    pub fn looseness(&self) -> f64 {
+        let internal: f64 = self.nodes.iter().filter(|n| !n.leaf).map(|n| n.aabb.half_area()).sum();
+        let primitives: f64 = self.boxes.iter().map(Aabb::half_area).sum();
+        if primitives > 0.0 { internal / primitives } else { 0.0 }
+    }
+
+    /// Replaces the primitive boxes (same count) and refits every node bottom up; rebuilds the
+    /// tree instead when it became more than [`REBUILD_LOOSENESS_RATIO`] times looser than when
+    /// built. Returns true when it rebuilt.
+    pub fn update(&mut self, boxes: &[Aabb]) -> bool {
+        assert_eq!(boxes.len(), self.boxes.len(), "a BVH update must keep the primitive count");
+        self.boxes.copy_from_slice(boxes);
+        for n in (0..self.nodes.len()).rev() {
+            let node = self.nodes[n];
+            let aabb = if node.leaf {
+                self.order[node.a as usize..node.b as usize]
+                    .iter()
+                    .fold(Aabb::EMPTY, |acc, &i| acc.union(&self.boxes[i as usize]))
+            } else {
+                self.nodes[node.a as usize].aabb.union(&self.nodes[node.b as usize].aabb)
+            };
+            self.nodes[n].aabb = aabb;
+        }
+        if self.looseness() > REBUILD_LOOSENESS_RATIO * self.built_looseness {
+            self.rebuild();
+            return true;
+        }
+        false
+    }
+
+    /// Calls `f(i, j)` for every primitive `i` of `self` and `j` of `other` whose boxes overlap.
+    pub fn for_each_overlap(&self, other: &Bvh, mut f: impl FnMut(u32, u32)) {
+        if self.nodes.is_empty() || other.nodes.is_empty() {
+            return;
+        }
+        let mut stack = vec![(0u32, 0u32)];
+        while let Some((x, y)) = stack.pop() {
+            let (nx, ny) = (&self.nodes[x as usize], &other.nodes[y as usize]);
+            if !nx.aabb.overlaps(&ny.aabb) {
+                continue;
+            }
+            match (nx.leaf, ny.leaf) {
+                (true, true) => {
+                    for &i in &self.order[nx.a as usize..nx.b as usize] {
+                        for &j in &other.order[ny.a as usize..ny.b as usize] {
+                            if self.boxes[i as usize].overlaps(&other.boxes[j as usize]) {
+                                f(i, j);
+                            }
+                        }
+                    }
+                }
+                // Descend into the larger internal node (or the only internal one).
+                (false, true) => stack.extend([(nx.a, y), (nx.b, y)]),
+                (true, false) => stack.extend([(x, ny.a), (x, ny.b)]),
+                (false, false) => {
+                    if nx.aabb.half_area() >= ny.aabb.half_area() {
+                        stack.extend([(nx.a, y), (nx.b, y)]);
+                    } else {
+                        stack.extend([(x, ny.a), (x, ny.b)]);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Calls `f(i, j)` with `i < j` once for every pair of primitives whose boxes overlap.
+    pub fn for_each_self_overlap(&self, mut f: impl FnMut(u32, u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        // (x, y, same): pairs within node x when `same`, else between nodes x and y.
+        let mut stack = vec![(0u32, 0u32, true)];
+        while let Some((x, y, same)) = stack.pop() {
+            let nx = &self.nodes[x as usize];
+            if same {
+                if nx.leaf {
+                    let items = &self.order[nx.a as usize..nx.b as usize];
+                    for (k, &i) in items.iter().enumerate() {
+                        for &j in &items[k + 1..] {
+                            if self.boxes[i as usize].overlaps(&self.boxes[j as usize]) {
+                                f(i.min(j), i.max(j));
+                            }
+                        }
+                    }
+                } else {
+                    stack.extend([(nx.a, nx.a, true), (nx.b, nx.b, true), (nx.a, nx.b, false)]);
+                }
+                continue;
+            }
+            let ny = &self.nodes[y as usize];
+            if !nx.aabb.overlaps(&ny.aabb) {
+                continue;
+            }
+            match (nx.leaf, ny.leaf) {
+                (true, true) => {
+                    for &i in &self.order[nx.a as usize..nx.b as usize] {
+                        for &j in &self.order[ny.a as usize..ny.b as usize] {
+                            if self.boxes[i as usize].overlaps(&self.boxes[j as usize]) {
+                                f(i.min(j), i.max(j));
+                            }
+                        }
+                    }
+                }
+                (false, true) => stack.extend([(nx.a, y, false), (nx.b, y, false)]),
+                (true, false) => stack.extend([(x, ny.a, false), (x, ny.b, false)]),
+                (false, false) => {
+                    if nx.aabb.half_area() >= ny.aabb.half_area() {
+                        stack.extend([(nx.a, y, false), (nx.b, y, false)]);
+                    } else {
+                        stack.extend([(x, ny.a, false), (x, ny.b, false)]);
+                    }
+                }
+            }
+        }
+    }
+}
