@@ -272,14 +272,23 @@ fn main() {
         ("implicit Euler, h = 1/15", SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1, 10, 1.0 / 15.0),
         ("XPBD, 5 substeps x 2 iterations", SOFTSHELL_INTEGRATOR_XPBD, 5, 2, 1.0 / 60.0),
         ("XPBD, 10 substeps x 1 iteration", SOFTSHELL_INTEGRATOR_XPBD, 10, 1, 1.0 / 60.0),
+        ("XPBD, 10 substeps x 10 iterations", SOFTSHELL_INTEGRATOR_XPBD, 10, 10, 1.0 / 60.0),
         ("XPBD, h = 1/15, 20 substeps", SOFTSHELL_INTEGRATOR_XPBD, 20, 1, 1.0 / 15.0),
         ("symplectic Euler, 40 substeps", SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, 40, 1, 1.0 / 60.0),
         ("explicit Euler (paper), 40 subst.", SOFTSHELL_INTEGRATOR_EXPLICIT_EULER, 40, 1, 1.0 / 60.0),
+        // The explicit integrators also need h below 2 m / (K_d Σ) for the damping: these rows use
+        // K_d = 0.5 N s/m (the others 50), where 40 substeps are enough for the springs.
+        ("symplectic Euler, 40 subst., K_d 0.5", SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, 40, 2, 1.0 / 60.0),
+        ("explicit Euler, 40 subst., K_d 0.5", SOFTSHELL_INTEGRATOR_EXPLICIT_EULER, 40, 2, 1.0 / 60.0),
     ];
     for (name, integrator, substeps, iterations, h) in configs {
         let mut d = base;
         d.integrator = integrator;
         d.substeps = substeps;
+        let explicit = [SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, SOFTSHELL_INTEGRATOR_EXPLICIT_EULER];
+        if explicit.contains(&integrator) && iterations == 2 {
+            d.spring_damping = 0.5; // the "K_d 0.5" rows
+        }
         if integrator != SOFTSHELL_INTEGRATOR_IMPLICIT_EULER {
             d.iterations = iterations;
         } else if iterations == 0 {
