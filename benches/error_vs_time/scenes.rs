@@ -564,6 +564,19 @@ pub const FINDINGS: &str = "## 6. Findings and gaps
   can be measured; it is left out rather than faked.
 - **Fig. 14 (energy vs edge-distance constraints):** the shell has no edge-distance constraint
   mode, so the comparison cannot be run; it is left out rather than faked.
+- **Body: zero-area triangles are rejected only with gas.** Without gas (cloth) a triangle
+  with three distinct but collinear corners is accepted (SPEC 4 asks for rejection with the
+  index); implicit Euler and XPBD stay finite on it.
+- **Fig. 13 is not reproduced with the default parameters:** the volume ratio after 100 steps
+  depends on the initial volume (for example StVK, XPBD: 0.35 / 0.19 / 0.41 at V0 / V0/4 / V0/16;
+  in the PBD form the smaller copies even turn inside out). The meshes are scaled but pressure
+  and density are not (the def says only the ratios pressure : E t : density t matter); the
+  paper's claim is not checked beyond that.
+- **Fig. 17** follows the paper: kB = 1 and 1e-1 barely contract and jitter (the ratio rose in
+  56 and 45 of 100 steps), kB = 1e-2 falls smoothly, kB = 1e-3 is close to kB = 0.
+- **threads = 1 holds no pool, but the evidence is thin:** `*_memory_bytes` of a 2-thread shell,
+  body or lattice is only 8 bytes more than a 1-thread one (the worker threads' stacks are not
+  counted), so tests/leave_out.rs can show no more than that.
 - **Lattice stats** have no per-stage counter (region damping, pins, forces): tests/leave_out.rs
   shows the work skipped only through memory and results, not a counter.
 - Not measured: meshes of 1M triangles (too slow for this bench on 2 cores).";
