@@ -51,7 +51,7 @@ fn section(md: &mut String, title: &str, error_name: &str, runs: &[Run], svg: Op
             None if r.family == "reference" => "(reference)".to_string(),
             None => "failed".to_string(),
         };
-        writeln!(md, "| {} | {} | {:.4} | {} | {} |", r.family, r.setting, r.seconds, e, r.note).unwrap();
+        writeln!(md, "| {} | {} | {:.2e} | {} | {} |", r.family, r.setting, r.seconds, e, r.note).unwrap();
     }
     if let Some((file, caption)) = svg {
         let mut families: Vec<&str> = Vec::new();

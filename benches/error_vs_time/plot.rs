@@ -9,7 +9,7 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
 }
 
-const COLOURS: [RGBColor; 13] = [
+const COLOURS: [RGBColor; 16] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -23,6 +23,9 @@ const COLOURS: [RGBColor; 13] = [
     RGBColor(0, 0, 0),
     RGBColor(255, 187, 120),
     RGBColor(152, 223, 138),
+    RGBColor(128, 0, 0),
+    RGBColor(0, 0, 160),
+    RGBColor(96, 96, 0),
 ];
 
 fn bounds(series: &[Series], positive_only: bool) -> ((f64, f64), (f64, f64)) {
@@ -51,9 +54,11 @@ fn bounds(series: &[Series], positive_only: bool) -> ((f64, f64), (f64, f64)) {
 
 /// Error against run time, log-log, one curve (with markers) per family.
 pub fn error_vs_time_svg(path: &str, title: &str, series: &[Series]) -> Result<(), Box<dyn std::error::Error>> {
-    let root = SVGBackend::new(path, (820, 560)).into_drawing_area();
+    let root = SVGBackend::new(path, (1100, 620)).into_drawing_area();
     root.fill(&WHITE)?;
     let ((x0, x1), (y0, y1)) = bounds(series, true);
+    // Leave the right third of the plot empty for the legend, so it never hides a point.
+    let x1 = x1 * (0.6 * ((x1 / x0).ln() + 2.25f64.ln())).exp();
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 20))
         .margin(12)
@@ -76,7 +81,12 @@ pub fn error_vs_time_svg(path: &str, title: &str, series: &[Series]) -> Result<(
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
         chart.draw_series(points.into_iter().map(|p| Circle::new(p, 4, colour.filled())))?;
     }
-    chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).draw()?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
     root.present()?;
     Ok(())
 }
@@ -89,9 +99,11 @@ pub fn lines_svg(
     y_label: &str,
     series: &[Series],
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let root = SVGBackend::new(path, (820, 560)).into_drawing_area();
+    let root = SVGBackend::new(path, (1100, 620)).into_drawing_area();
     root.fill(&WHITE)?;
     let ((x0, x1), (y0, y1)) = bounds(series, false);
+    // Leave the right third of the plot empty for the legend, so it never hides a curve.
+    let x1 = x1 + 0.6 * (x1 - x0);
     let pad = 0.05 * (y1 - y0);
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 20))
@@ -107,7 +119,12 @@ pub fn lines_svg(
             .label(s.label.as_str())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
     }
-    chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).draw()?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
     root.present()?;
     Ok(())
 }
