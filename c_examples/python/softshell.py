@@ -619,7 +619,7 @@ class Shell(_Handle):
         raw = _h()
         _check(C.shell_new(mesh.handle, ctypes.byref(d), ctypes.byref(raw)))
         super().__init__(raw)
-        self.triangles = mesh.triangles()  # the shell keeps the mesh's triangles
+        self._triangles = mesh.triangles()  # the shell keeps the mesh's triangles
 
     def add_anisotropic_region(self, faces, def_=None, **fields):
         f = _u32(faces, "faces")
@@ -642,6 +642,10 @@ class Shell(_Handle):
 
     def positions(self):
         return _copy(C.shell_copy_positions, self.handle, np.float32, columns=3)
+
+    def triangles(self):
+        """The mesh's triangles, (m, 3) uint32 (they never change)."""
+        return self._triangles.copy()
 
     def face_energy(self):
         return _copy(C.shell_copy_face_energy, self.handle, np.float32)
