@@ -54,6 +54,7 @@ CURVATURE_MEAN = 0
 CURVATURE_GAUSSIAN = 1
 SOLVER_XPBD = 0
 SOLVER_PBD = 1
+SOLVER_PBD_DISTANCE = 2  # on the shell branch (edge-distance baseline); harmless before it lands
 MATERIAL_STVK = 0
 MATERIAL_COROTATED = 1
 MATERIAL_LINEAR = 2
