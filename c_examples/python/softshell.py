@@ -54,6 +54,7 @@ CURVATURE_MEAN = 0
 CURVATURE_GAUSSIAN = 1
 SOLVER_XPBD = 0
 SOLVER_PBD = 1
+SOLVER_PBD_DISTANCE = 2  # on the shell branch (edge-distance baseline); harmless before it lands
 MATERIAL_STVK = 0
 MATERIAL_COROTATED = 1
 MATERIAL_LINEAR = 2
@@ -619,7 +620,7 @@ class Shell(_Handle):
         raw = _h()
         _check(C.shell_new(mesh.handle, ctypes.byref(d), ctypes.byref(raw)))
         super().__init__(raw)
-        self.triangles = mesh.triangles()  # the shell keeps the mesh's triangles
+        self._triangles = mesh.triangles()  # the shell keeps the mesh's triangles
 
     def add_anisotropic_region(self, faces, def_=None, **fields):
         f = _u32(faces, "faces")
@@ -642,6 +643,10 @@ class Shell(_Handle):
 
     def positions(self):
         return _copy(C.shell_copy_positions, self.handle, np.float32, columns=3)
+
+    def triangles(self):
+        """The mesh's triangles, (m, 3) uint32 (they never change)."""
+        return self._triangles.copy()
 
     def face_energy(self):
         return _copy(C.shell_copy_face_energy, self.handle, np.float32)

@@ -170,6 +170,7 @@ class Buffers(unittest.TestCase):
         self.assertEqual(shell.positions().shape, (sphere.vertex_count, 3))
         self.assertEqual(shell.face_energy().shape, (sphere.triangle_count,))
         self.assertIsNone(shell.step(stats=False))
+        np.testing.assert_array_equal(shell.triangles(), sphere.triangles())
         shell.add_anisotropic_region(np.arange(10), target_stretch=0.9)
 
         body = softshell.Body(sphere, gas_amount=10.0)
@@ -188,6 +189,25 @@ class Buffers(unittest.TestCase):
         self.assertGreater(body.vertex_count, sphere.vertex_count)
         self.assertEqual(topology["fragment_ids"].shape, (body.triangle_count,))
         self.assertFalse(body.refresh()[0])
+
+    def test_frames_are_written(self):
+        sphere = softshell.Mesh.load_obj(os.path.join(ROOT, "data", "sphere.obj"))
+        shell = softshell.Shell(sphere)
+        shell.step()
+        sheet = softshell.Lattice(columns=6, rows=5)
+        with tempfile.TemporaryDirectory() as tmp:
+            ply = os.path.join(tmp, "shell.ply")
+            shell.save_ply(ply, softshell.SHELL_PLY_PRESSURE_FORCE)
+            with open(ply) as f:
+                header = f.read().split("end_header")[0]
+            for name in ("mean_curvature", "gaussian_curvature", "energy", "pressure_force", "red"):
+                self.assertIn(f"property float {name}" if name != "red" else "property uchar red", header)
+            self.assertIn(f"element vertex {sphere.vertex_count}", header)
+            sheet.save_obj(os.path.join(tmp, "sheet.obj"))
+            self.assertEqual(softshell.Mesh.load_obj(os.path.join(tmp, "sheet.obj")).vertex_count, 30)
+            with self.assertRaises(softshell.Error) as caught:
+                sheet.save_ply(os.path.join(tmp, "sheet.ply"), 9)
+            self.assertEqual(caught.exception.status_name, "INVALID_ARGUMENT")
 
     def test_ccd(self):
         hit, toi = softshell.ccd_edge_edge([-1, 1, 0], [1, 1, 0], [0, 0, -1], [0, 0, 1], [-1, -1, 0], [1, -1, 0],
