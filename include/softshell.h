@@ -23,12 +23,112 @@
 // Refitting may make the tree this much looser than when it was built before it is rebuilt.
 #define REBUILD_LOOSENESS_RATIO 1.5
 
+// Explicit Euler, `x += h v; v += h a` with the old velocity: the paper's integrator. Unstable
+// for stiff springs (`h` above about `2/omega`): such a step returns `SOFTSHELL_STATUS_UNSTABLE`.
+#define SOFTSHELL_INTEGRATOR_EXPLICIT_EULER 0
+
+// Symplectic (semi-implicit) Euler, `v += h a; x += h v`: stable while `h < 2/omega_max`.
+#define SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER 1
+
+// Linearised backward Euler solved by conjugate gradients: stable at any time step, with
+// numerical damping. The default.
+#define SOFTSHELL_INTEGRATOR_IMPLICIT_EULER 2
+
+// XPBD: springs as distance constraints with compliance 1/K_s, gas as a volume constraint;
+// `iterations` Gauss-Seidel sweeps per substep.
+#define SOFTSHELL_INTEGRATOR_XPBD 3
+
 // Mean curvature H (1/m), for `..._copy_vertex_curvature`: positive where the surface bends away
 // from its outward normal (1 everywhere on a unit sphere).
 #define SOFTSHELL_CURVATURE_MEAN 0
 
 // Gaussian curvature K (1/m^2) from the angle defect, for `..._copy_vertex_curvature`.
 #define SOFTSHELL_CURVATURE_GAUSSIAN 1
+
+// `SoftshellShellDef.solver`: consistent XPBD energy constraints (the default): Young's modulus
+// and thickness mean what they say, whatever the iteration count (SPEC 1.3).
+#define SOFTSHELL_SOLVER_XPBD 0
+
+// `SoftshellShellDef.solver`: the paper's plain PBD energy constraints `C = W`: stiffness is set
+// by the iteration count and Young's modulus has no effect (for reproducing the paper).
+#define SOFTSHELL_SOLVER_PBD 1
+
+// `SoftshellShellDef.solver`: plain PBD edge-distance constraints instead of membrane energies
+// (the paper's baseline, for comparisons: triangles may shear and change area freely). The
+// membrane energy is still measured for the stats.
+#define SOFTSHELL_SOLVER_PBD_DISTANCE 2
+
+// `SoftshellShellDef.material`: Saint Venant-Kirchhoff (the default and the paper's).
+#define SOFTSHELL_MATERIAL_STVK 0
+
+// `SoftshellShellDef.material`: corotated linear elasticity (thin polar decomposition).
+#define SOFTSHELL_MATERIAL_COROTATED 1
+
+// `SoftshellShellDef.material`: linear elasticity in the fixed rest frame (not rotation
+// invariant: for small motions only).
+#define SOFTSHELL_MATERIAL_LINEAR 2
+
+// `SoftshellShellDef.material`: compressible neo-Hookean.
+#define SOFTSHELL_MATERIAL_NEO_HOOKEAN 3
+
+// `SoftshellShellDef.material`: incompressible Mooney-Rivlin membrane with C10 = C01 = mu/4
+// (Poisson's ratio is not used).
+#define SOFTSHELL_MATERIAL_MOONEY_RIVLIN 4
+
+// `SoftshellShellDef.bending`: no bending constraints (none are stored).
+#define SOFTSHELL_BENDING_NONE 0
+
+// `SoftshellShellDef.bending`: the paper's isometric bending, whose rest shape is flat (it
+// slowly flattens a curved shell even without pressure).
+#define SOFTSHELL_BENDING_ISOMETRIC 1
+
+// `SoftshellShellDef.bending`: isometric bending that keeps the rest curvature (the default):
+// without pressure the shell keeps its shape.
+#define SOFTSHELL_BENDING_ISOMETRIC_REST 2
+
+// `SoftshellAnisotropyDef.energy`: as-rigid-as-possible fibre energy (the default; the paper's).
+#define SOFTSHELL_ANISOTROPY_ARAP 0
+
+// `SoftshellAnisotropyDef.energy`: St. Venant-Kirchhoff fibre energy `mu/2 (I5 - L^2)^2`.
+#define SOFTSHELL_ANISOTROPY_STVK 1
+
+// `SoftshellAnisotropyDef.energy`: square-root fibre energy `mu/2 (sqrt(I5) - L)^2`.
+#define SOFTSHELL_ANISOTROPY_SQRT 2
+
+// `softshell_shell_save_ply` colour: mean curvature H, 1/m (blue concave, red convex).
+#define SOFTSHELL_SHELL_PLY_MEAN_CURVATURE 0
+
+// `softshell_shell_save_ply` colour: Gaussian curvature K, 1/m^2.
+#define SOFTSHELL_SHELL_PLY_GAUSSIAN_CURVATURE 1
+
+// `softshell_shell_save_ply` colour: membrane energy per vertex, J (a third of each adjacent
+// face's energy).
+#define SOFTSHELL_SHELL_PLY_ENERGY 2
+
+// `softshell_shell_save_ply` colour: magnitude of the pressure force on each vertex, N
+// (`|P/3 sum A_j n_j|` over the adjacent faces, SPEC 1.2).
+#define SOFTSHELL_SHELL_PLY_PRESSURE_FORCE 3
+
+// `softshell_body_save_ply` colour: speed of each vertex, m/s.
+#define SOFTSHELL_BODY_PLY_SPEED 0
+
+// `softshell_body_save_ply` colour: the fragment (connected piece) of each vertex, coloured so
+// that neighbouring fragment numbers get different colours.
+#define SOFTSHELL_BODY_PLY_FRAGMENT 1
+
+// `softshell_body_save_ply` colour: mean curvature H of the current surface, 1/m.
+#define SOFTSHELL_BODY_PLY_MEAN_CURVATURE 2
+
+// `softshell_lattice_save_ply` colour: height y of each particle, m (the displacement from the
+// rest plane y = 0).
+#define SOFTSHELL_LATTICE_PLY_HEIGHT 0
+
+// `softshell_lattice_save_ply` colour: speed of each particle, m/s.
+#define SOFTSHELL_LATTICE_PLY_SPEED 1
+
+// `softshell_lattice_save_ply` colour: distance from each particle to its shape-matching goal
+// |g - x|, m (how strained the sheet is there).
+#define SOFTSHELL_LATTICE_PLY_GOAL_DISTANCE 2
 
 // Result of every fallible call. Values are explicit and append-only: they are never renumbered.
 enum SoftshellStatus
@@ -68,6 +168,36 @@ typedef uint32_t SoftshellStatus;
 #endif // __STDC_VERSION__ >= 202311L
 #endif // __cplusplus
 
+// A mass-spring soft body with gas and fracture (SPEC section 2).
+//
+// Created by `softshell_body_new`, destroyed by `softshell_body_free`. Functions:
+// `softshell_body_add_sphere_obstacle`, `_add_plane_obstacle`, `_pin_vertex`,
+// `_apply_impulse`, `_break_edge`, `_step`, `_topology_generation`, `_vertex_count`,
+// `_triangle_count`, `_fragment_count`, `_copy_positions`, `_copy_velocities`, `_copy_masses`,
+// `_copy_triangles`, `_copy_vertex_origins`, `_copy_fragment_ids`, `_memory_bytes`.
+//
+// Fracture appends vertices and rewrites triangles: vertex indices are stable (survivors are
+// never renumbered), but the counts change, so re-query buffer sizes whenever
+// `softshell_body_topology_generation` changes.
+//
+// Thread rules: a body may move between threads; one body must not be used from two threads at
+// once; different bodies may be stepped concurrently.
+typedef struct SoftshellBody SoftshellBody;
+
+// A FastLSM elastic lattice surface (SPEC 3): particles on a 2D lattice with an optional mask
+// of holes, shape-matched in overlapping square regions.
+//
+// Created by `softshell_lattice_new`, destroyed by `softshell_lattice_free`. Edited with
+// `softshell_lattice_pin` / `_unpin` / `_apply_force` / `_set_positions`, advanced with
+// `softshell_lattice_step`, read with `softshell_lattice_particle_count`, `_triangle_count`,
+// `_particle_index`, `_copy_positions`, `_copy_velocities`, `_copy_goals`, `_copy_triangles`
+// and `_memory_bytes`.
+//
+// Particles are numbered row by row (row 0 first, column 0 first within a row), holes skipped.
+// Thread rules: a lattice may move between threads, but must not be used from two threads at
+// once; different lattices may be stepped concurrently. It owns its worker threads.
+typedef struct SoftshellLattice SoftshellLattice;
+
 // An immutable triangle mesh: positions (float x,y,z) and triangles (uint32_t a,b,c,
 // counter-clockwise seen from outside). Every index is in range and every coordinate finite;
 // it may be open, non-manifold or hold degenerate triangles (see `softshell_mesh_report`).
@@ -77,6 +207,168 @@ typedef uint32_t SoftshellStatus;
 // simulators made from it exist. A mesh is never modified, so it may be read from several
 // threads at once.
 typedef struct SoftshellMesh SoftshellMesh;
+
+// A thin shell squeezed by outside air pressure (SPEC section 1). Made by `softshell_shell_new`
+// from a closed mesh, destroyed by `softshell_shell_free`. Functions: `softshell_shell_step`,
+// `softshell_shell_add_anisotropic_region`, `softshell_shell_vertex_count`,
+// `softshell_shell_copy_positions`, `softshell_shell_copy_face_energy`,
+// `softshell_shell_copy_vertex_curvature`, `softshell_shell_memory_bytes`.
+//
+// Thread rules: a shell may move between threads but must not be used from two threads at
+// once; different shells may be stepped concurrently. Each shell owns its worker threads.
+typedef struct SoftshellShell SoftshellShell;
+
+// Settings of a soft body. Fill with `softshell_body_def_default()`, then edit fields.
+typedef struct SoftshellBodyDef {
+  // Step length h, s, in [1e-6, 1]. Default 1/60.
+  float time_step;
+  // Substeps per step (each h / substeps), in [1, 1000]. Default 1.
+  uint32_t substeps;
+  // `SOFTSHELL_INTEGRATOR_EXPLICIT_EULER` (the paper's) | `_SYMPLECTIC_EULER` |
+  // `_IMPLICIT_EULER` (default) | `_XPBD`.
+  uint32_t integrator;
+  // Total mass, kg, > 0; spread over the vertices in proportion to their share of the area.
+  // Default 1.
+  float total_mass;
+  // Spring stiffness K_s, N/m, in [0, 1e12]: one spring per mesh edge. Default 1000.
+  float spring_stiffness;
+  // Spring damping K_d along each spring, N s/m, in [0, 1e9]. Default 1.
+  float spring_damping;
+  // Amount of gas nRT, J (pressure = nRT / volume), in [0, 1e12]. 0 (default) = no gas; then
+  // open meshes (cloth) are allowed. With gas the mesh must be closed, manifold and outward.
+  float gas_amount;
+  // Gravity, m/s^2. Default 0, -9.81, 0.
+  float gravity[3];
+  // Wind velocity, m/s. Default 0, 0, 0.
+  float wind[3];
+  // Wind drag coefficient, kg/(m^2 s): each face feels `drag ((wind - v)·n) n area`, in
+  // [0, 1e6]. Default 0 (no wind force).
+  float drag;
+  // Spring strain `(length - rest)/rest` above which a spring breaks and the surface cracks,
+  // in [0, 1e6]. 0 (default) = never.
+  float break_strain;
+  // Net force on a vertex, N, above which it is cut out as a core block, in [0, 1e12].
+  // 0 (default) = never.
+  float break_force;
+  // Gas leak through holes, m/(Pa s): `d(nRT)/dt = -leak_rate * hole_area * pressure`, in
+  // [0, 1e6]. Default 0.
+  float leak_rate;
+  // A ground plane y = ground_height (normal +y). Default false.
+  bool ground;
+  // Height of the ground plane, m. Default 0.
+  float ground_height;
+  // Restitution of contacts with the ground and obstacles, in [0, 1]. Default 0.
+  float restitution;
+  // Coulomb friction coefficient of contacts, in [0, 1000]. Default 0.5.
+  float friction;
+  // Worker threads: 0 = one per core, 1 = serial (default), at most 256. Results do not depend
+  // on it.
+  uint32_t threads;
+  // XPBD Gauss-Seidel sweeps per substep; the implicit integrator allows 10 times as many
+  // conjugate-gradient iterations (at least 40). In [1, 1000]. Default 10.
+  uint32_t iterations;
+  // Set by `softshell_body_def_default`; do not touch.
+  uint32_t internal_cookie;
+} SoftshellBodyDef;
+
+// What a step did. Filled by `softshell_body_step`. Fields may be appended in later versions.
+typedef struct SoftshellBodyStats {
+  // Steps taken so far.
+  uint64_t step;
+  // Simulated time, s.
+  double time;
+  // Enclosed volume, m^3: the sum over the pieces that hold gas (holes capped), or the signed
+  // volume of the mesh without gas.
+  double volume;
+  // Mean gas pressure (total nRT / total volume), Pa; 0 without gas.
+  double pressure;
+  // Kinetic energy, J.
+  double kinetic_energy;
+  // Energy error: (kinetic + spring + gas + gravitational energy) minus its initial value and
+  // the work of wind and impulses, J. Damping, contacts and leaks make it negative; a growing
+  // positive value means the integrator is adding energy.
+  double energy_drift;
+  // Springs broken during this step.
+  uint64_t springs_broken;
+  // Core blocks released during this step.
+  uint64_t cores_released;
+  // Bumped on every topology change (re-query buffers when it changes).
+  uint64_t topology_generation;
+  // Vertices now (fracture appends vertices).
+  size_t vertex_count;
+  // Triangles now.
+  size_t triangle_count;
+  // Connected pieces now.
+  size_t fragment_count;
+  // Wall-clock time of the step, s.
+  double step_seconds;
+  // True when a gas volume was clamped during the step (a piece near zero or inverted volume:
+  // its pressure stopped growing).
+  bool volume_clamped;
+  // Largest spring strain at the end of the step.
+  double max_strain;
+  // Conjugate-gradient iterations of the step (implicit Euler), 0 otherwise.
+  uint64_t solver_iterations;
+} SoftshellBodyStats;
+
+// Settings of a lattice, for `softshell_lattice_new`. Always start from
+// `softshell_lattice_def_default()` and edit fields: a def not made by it is refused.
+//
+// The sheet lies in the x-z plane at rest: particle (column, row) at
+// `(column * spacing, 0, row * spacing)`, its upper side facing +y.
+typedef struct SoftshellLatticeDef {
+  // Particles along x, >= 1. Default 32.
+  uint32_t columns;
+  // Particles along z, >= 1. Default 32. `columns * rows` is at most 67,108,864; a lattice
+  // takes about 320 bytes per site (370 with region damping), holes included, plus
+  // `(2w + 2) * columns` sites' worth of scratch per thread.
+  uint32_t rows;
+  // Rest distance between neighbouring particles, m, > 0. Default 0.05.
+  float spacing;
+  // Region half-width w >= 1: each particle's region is the (2w+1) x (2w+1) box of lattice
+  // sites around it (clipped by the border and the mask). Larger w = stiffer; the cost of a
+  // step does not grow with w. Default 2.
+  uint32_t region_half_width;
+  // alpha in (0, 1]: how hard particles are pulled to their goals each step (1 = all the way).
+  // Default 0.5.
+  float stiffness;
+  // Region damping in [0, 1]: the fraction of each particle's velocity relative to its
+  // regions' rigid motion removed per step (damps wobble, keeps rigid motion). Default 0.2.
+  // 0 turns it off and saves its memory and time.
+  float damping;
+  // Time step, s, in (0, 1]. Default 1/60.
+  float time_step;
+  // Mass of each particle, kg, > 0. Default 0.01.
+  float particle_mass;
+  // Gravity, m/s^2, finite. Default (0, -9.81, 0).
+  float gravity[3];
+  // Worker threads of this lattice: 0 = one per core, 1 = run on the caller's thread
+  // (default), at most 256. Results are bit-identical for any value.
+  uint32_t threads;
+  // Viscous damping of all motion, 1/s, in [0, 1e6]: each step velocities are scaled by
+  // `max(0, 1 - velocity_damping * time_step)`. Region damping leaves the slow, locally
+  // rigid modes alone (a hanging sheet bouncing); this brings them to rest. Default 0.5.
+  float velocity_damping;
+  // Set by `softshell_lattice_def_default`; do not touch.
+  uint32_t internal_cookie;
+} SoftshellLatticeDef;
+
+// What one `softshell_lattice_step` did. Fields may be appended in later versions.
+typedef struct SoftshellLatticeStats {
+  // Steps completed, this one included.
+  uint64_t step;
+  // Simulated time after the step, s.
+  double time;
+  // Mean over all particles (pinned ones included) of the distance from the particle to its
+  // goal, |g - x|, at the start of the step, m. 0 at rest and for any rigid motion.
+  double goal_distance;
+  // Wall-clock time the step took, s.
+  double step_seconds;
+  // Largest |g - x| over all particles at the start of the step, m.
+  double max_goal_distance;
+  // Kinetic energy of all particles after the step, J.
+  double kinetic_energy;
+} SoftshellLatticeStats;
 
 // What a mesh is. Filled by `softshell_mesh_report`. Fields may be appended in later versions.
 typedef struct SoftshellMeshReport {
@@ -121,9 +413,316 @@ typedef struct SoftshellMeshReport {
   double min_angle_degrees;
 } SoftshellMeshReport;
 
+// Settings of a shell, filled by `softshell_shell_def_default()` and then edited field by field.
+//
+// The defaults are made for a closed mesh scaled to a unit bounding-box diagonal: the shell is
+// squeezed elastically, buckles and shrinks, its volume falling monotonically until
+// `stop_volume_ratio` (measured: the unit sphere of data/ passes V/V0 = 0.8 near step 70, the
+// finer kitten near step 20); with `pressure` 0 it keeps its rest shape. The material describes
+// a soft, thin, heavy membrane (1 kg/m^2, membrane stiffness E t = 1 N/m). For a mesh s times
+// larger, the same motion in the same time steps needs pressure x s and Young's modulus x s^2
+// (thickness and density unchanged).
+typedef struct SoftshellShellDef {
+  // Time step h, s, in (0, 1]. Default 1/60.
+  float time_step;
+  // Substeps per step (each runs the whole step with h/substeps), 1..=1000. Default 1.
+  uint32_t substeps;
+  // Gauss-Seidel iterations per substep, 1..=1000. Default 5 (the paper's).
+  uint32_t iterations;
+  // `SOFTSHELL_SOLVER_XPBD` (default), `SOFTSHELL_SOLVER_PBD` (the paper's form) or
+  // `SOFTSHELL_SOLVER_PBD_DISTANCE` (edge-distance baseline).
+  uint32_t solver;
+  // Outside air pressure P, Pa, finite, |P| <= 1e12 (negative inflates). Default 0.7.
+  float pressure;
+  // `SOFTSHELL_MATERIAL_STVK` (default), `_COROTATED`, `_LINEAR`, `_NEO_HOOKEAN` or
+  // `_MOONEY_RIVLIN`.
+  uint32_t material;
+  // Young's modulus E, Pa, in (0, 1e12]. Default 1000 (with the default thickness: E t = 1 N/m).
+  float youngs_modulus;
+  // Poisson's ratio, in [0, 0.49]. Default 0.3.
+  float poisson_ratio;
+  // Shell thickness t, m, in (0, 1e3]. Default 0.001.
+  float thickness;
+  // Density, kg/m^3, in (0, 1e9]; with the thickness and the rest areas it gives the vertex
+  // masses (a third of each adjacent face). Default 1000.
+  float density;
+  // `SOFTSHELL_BENDING_ISOMETRIC_REST` (default), `_ISOMETRIC` (the paper's) or `_NONE`.
+  uint32_t bending;
+  // Bending coefficient kB, dimensionless, in [0, 1e6]. Default 0.01 (the paper's). With XPBD,
+  // each edge stencil gets the energy `kB E t (A0+A1)/2 * E_B`: kB = 1 makes bending as stiff
+  // as stretching at the scale of one triangle. With PBD it scales each bending correction,
+  // as in the paper.
+  float bending_coefficient;
+  // Velocity damping per second, in [0, 1e6]: velocities are scaled by max(0, 1 - damping h)
+  // each substep. Default 8: the contraction is a slow, nearly quasi-static
+  // process, and this removes the elastic rebound from the sudden pressure load (the default
+  // sphere's volume then falls monotonically).
+  float damping;
+  // The shell is finished (later steps do nothing) when V/V0 falls below this, in [0, 1);
+  // 0 = never. Default 0.3.
+  float stop_volume_ratio;
+  // Self-collision (continuous collision detection). Default true. The collision stage is not
+  // implemented yet: it currently does nothing and its stats stay 0.
+  bool collisions;
+  // Collision thickness delta relative to the bounding-box diagonal, in [0, 1]. Default 1e-4.
+  float collision_thickness;
+  // Worker threads: 0 = one per core, 1 = serial on the caller's thread (default), at most
+  // 256. Results are bit-identical whatever the count.
+  uint32_t threads;
+  // Set by `softshell_shell_def_default`; do not touch.
+  uint32_t internal_cookie;
+} SoftshellShellDef;
+
+// Settings of one anisotropic region (SPEC 1.5), filled by `softshell_anisotropy_def_default()`.
+typedef struct SoftshellAnisotropyDef {
+  // `SOFTSHELL_ANISOTROPY_ARAP` (default), `_STVK` or `_SQRT`.
+  uint32_t energy;
+  // Fibre stiffness mu, Pa, in (0, 1e12]. Default 1000 (the default Young's modulus).
+  float stiffness;
+  // Inward push k_A (paper section 3.3), dimensionless, in [0, 1e6]: each vertex gradient of
+  // the fibre constraint gets `+ k_A sqrt(A0) n` (n the face's outward unit normal, A0 its rest
+  // area, so the push does not depend on the mesh scale), which turns corrections into an
+  // inward motion of the region. The push acts as long as the fibre is
+  // strained, so large values make the region cave through the opposite side (without the
+  // collision stage). Default 0.003.
+  float inward_push;
+  // Target stretch L along the fibre, in (0, 1]: 1 = the paper's energies, below 1 = active
+  // contraction (the fibre wants to shorten to L). Default 1.
+  float target_stretch;
+  // Fibre direction in world space, finite. 0,0,0 (default) = chosen per face: the direction
+  // from the face's centre towards the region's centre, projected into the face, so fibres
+  // converge on the middle of the region.
+  float direction[3];
+  // Set by `softshell_anisotropy_def_default`; do not touch.
+  uint32_t internal_cookie;
+} SoftshellAnisotropyDef;
+
+// What one `softshell_shell_step` did. Fields may be appended in later versions.
+typedef struct SoftshellShellStats {
+  // Steps taken so far (after this one).
+  uint64_t step;
+  // Simulated time, s.
+  double time;
+  // Enclosed volume V, m^3.
+  double volume;
+  // V / V0 (V0 the rest volume).
+  double volume_ratio;
+  // True once the volume ratio fell below `stop_volume_ratio`.
+  bool finished;
+  // Largest relative constraint violation after the last iteration, dimensionless: with
+  // XPBD |C + alpha lambda| and with PBD |C|, where C = sqrt(2 W^) is made relative to the
+  // element (divided by sqrt(A0) for membrane and fibre constraints, so it reads like a strain).
+  double residual;
+  // Membrane energy, J.
+  double elastic_energy;
+  // Bending energy, J (with the XPBD stiffness `kB E t (A0+A1)/2`, for both solvers).
+  double bending_energy;
+  // Anisotropic fibre energy, J (`mu t A0 psi` summed over region faces).
+  double anisotropic_energy;
+  // Collision candidate pairs after the broad phase (0 while collisions are not implemented).
+  uint64_t collision_candidates;
+  // Exact continuous collision tests run (0 while collisions are not implemented).
+  uint64_t ccd_tests;
+  // Contacts resolved (0 while collisions are not implemented).
+  uint64_t contacts;
+  // Wall time of the step, s.
+  double step_seconds;
+  // True when the volume ratio has changed by less than 1e-5 per step for the last 60 steps
+  // without reaching `stop_volume_ratio`: the contraction has stalled (SPEC 1.7).
+  bool stalled;
+} SoftshellShellStats;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
+
+// The default body def: h = 1/60 s, 1 substep, implicit Euler, 1 kg, K_s = 1000 N/m,
+// K_d = 1 N s/m, no gas, gravity 0,-9.81,0, no wind, no fracture, no ground, restitution 0,
+// friction 0.5, 1 thread, 10 iterations.
+struct SoftshellBodyDef softshell_body_def_default(void);
+
+// Creates a soft body from `mesh` (copied: the mesh may be freed afterwards) and `def`.
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL pointer, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
+// for a def not made by `softshell_body_def_default` or a field out of range (the message names
+// it), `SOFTSHELL_STATUS_INVALID_MESH` when the mesh does not suit (with gas: not closed,
+// manifold and outward; always: a triangle with a repeated corner or an edge of zero length),
+// `SOFTSHELL_STATUS_UNSUPPORTED` when built without the `body` feature. On success
+// `*out_body` receives a new handle to free with `softshell_body_free`; on failure it is left
+// unchanged.
+//
+// # Safety
+// `mesh` must be NULL or a live mesh, `def` NULL or a readable def, `out_body` NULL or writable.
+SoftshellStatus softshell_body_new(const struct SoftshellMesh *mesh,
+                                   const struct SoftshellBodyDef *def,
+                                   struct SoftshellBody **out_body);
+
+// Destroys a body. `softshell_body_free(NULL)` does nothing; freeing twice is undefined
+// behaviour.
+//
+// # Safety
+// `body` must be NULL or a live body that is not used again.
+void softshell_body_free(struct SoftshellBody *body);
+
+// Adds a solid sphere obstacle (centre `center` float[3], m; `radius` > 0, m): vertices are
+// kept outside it with the def's restitution and friction.
+// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius not > 0.
+//
+// # Safety
+// `body` must be NULL or a live body; `center` NULL or three readable floats.
+SoftshellStatus softshell_body_add_sphere_obstacle(struct SoftshellBody *body,
+                                                   const float *center,
+                                                   float radius);
+
+// Adds a half-space obstacle: the plane through `point` (float[3], m) with `normal` (float[3],
+// any non-zero length, pointing to the free side); vertices are kept on the normal's side.
+// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a zero normal.
+//
+// # Safety
+// `body` must be NULL or a live body; `point` and `normal` NULL or three readable floats each.
+SoftshellStatus softshell_body_add_plane_obstacle(struct SoftshellBody *body,
+                                                  const float *point,
+                                                  const float *normal);
+
+// Pins vertex `vertex`: it stays where it is (velocity zero) and no longer responds to forces.
+// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an index out of range.
+//
+// # Safety
+// `body` must be NULL or a live body.
+SoftshellStatus softshell_body_pin_vertex(struct SoftshellBody *body, uint32_t vertex);
+
+// Applies `impulse` (float[3], N s) to vertex `vertex`: its velocity changes by impulse/mass
+// (a pinned vertex ignores it). Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an index out of
+// range or a non-finite impulse.
+//
+// # Safety
+// `body` must be NULL or a live body; `impulse` NULL or three readable floats.
+SoftshellStatus softshell_body_apply_impulse(struct SoftshellBody *body,
+                                             uint32_t vertex,
+                                             const float *impulse);
+
+// Breaks the spring between vertices `a` and `b` by hand (an interactive cut): the same crack
+// as a spring over `break_strain`. The surface opens where a chain of broken edges passes through
+// a vertex (that vertex is split; copies are appended). Bumps the topology generation.
+// Works whatever the break limits are. Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` when an index
+// is out of range or `a` and `b` are not joined by a spring (not an edge, or already broken).
+//
+// # Safety
+// `body` must be NULL or a live body.
+SoftshellStatus softshell_body_break_edge(struct SoftshellBody *body, uint32_t a, uint32_t b);
+
+// Advances the body by one `time_step`: forces, integration (substeps), obstacles, gas leak,
+// then fracture (springs over `break_strain` crack, nodes over `break_force` release core
+// blocks). Writes what happened into `*out_stats` when it is not NULL.
+//
+// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a NaN, or energy growing without a
+// source): the state is rolled back to before the step, `*out_stats` is not written, and the
+// message gives the largest stable time step it estimates.
+//
+// # Safety
+// `body` must be NULL or a live body; `out_stats` NULL or writable.
+SoftshellStatus softshell_body_step(struct SoftshellBody *body,
+                                    struct SoftshellBodyStats *out_stats);
+
+// Topology generation: 0 at creation, bumped by every topology change (a crack, a core block,
+// `softshell_body_break_edge`). When it changes, re-query vertex and triangle counts and
+// buffer sizes. 0 for NULL.
+//
+// # Safety
+// `body` must be NULL or a live body.
+uint64_t softshell_body_topology_generation(const struct SoftshellBody *body);
+
+// Number of vertices now (grows with fracture); 0 for NULL.
+//
+// # Safety
+// `body` must be NULL or a live body.
+size_t softshell_body_vertex_count(const struct SoftshellBody *body);
+
+// Number of triangles now (grows when core blocks are released); 0 for NULL.
+//
+// # Safety
+// `body` must be NULL or a live body.
+size_t softshell_body_triangle_count(const struct SoftshellBody *body);
+
+// Number of connected pieces (fragments) now; 0 for NULL.
+//
+// # Safety
+// `body` must be NULL or a live body.
+size_t softshell_body_fragment_count(const struct SoftshellBody *body);
+
+// Heap bytes held by the body (positions, springs, gas and fracture bookkeeping, scratch);
+// nothing is held for gas without gas, nor for fracture while both break limits are 0 and no
+// edge was broken by hand. 0 for NULL.
+//
+// # Safety
+// `body` must be NULL or a live body.
+size_t softshell_body_memory_bytes(const struct SoftshellBody *body);
+
+// Copies the positions (x,y,z per vertex, `3 * vertex_count` floats, m) into `out`.
+// If `out` is NULL or `capacity` (in floats) is too small, returns
+// `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
+// nothing else. On success `*out_len` is the number of floats written.
+//
+// # Safety
+// `body` must be NULL or a live body; `out` NULL or `capacity` writable floats; `out_len` NULL
+// or writable.
+SoftshellStatus softshell_body_copy_positions(const struct SoftshellBody *body,
+                                              float *out,
+                                              size_t capacity,
+                                              size_t *out_len);
+
+// Copies the velocities (x,y,z per vertex, `3 * vertex_count` floats, m/s) into `out`, with the
+// buffer rules of `softshell_body_copy_positions`.
+//
+// # Safety
+// As `softshell_body_copy_positions`.
+SoftshellStatus softshell_body_copy_velocities(const struct SoftshellBody *body,
+                                               float *out,
+                                               size_t capacity,
+                                               size_t *out_len);
+
+// Copies the vertex masses (one float per vertex, kg; pinned vertices keep theirs) into `out`,
+// with the buffer rules of `softshell_body_copy_positions`. Their sum stays `total_mass`
+// through fracture.
+//
+// # Safety
+// As `softshell_body_copy_positions`.
+SoftshellStatus softshell_body_copy_masses(const struct SoftshellBody *body,
+                                           float *out,
+                                           size_t capacity,
+                                           size_t *out_len);
+
+// Copies the triangles (a,b,c per triangle, `3 * triangle_count` uint32_t, counter-clockwise
+// from outside) into `out`, with the buffer rules of `softshell_body_copy_positions`
+// (capacity and `*out_len` count uint32_t).
+//
+// # Safety
+// As `softshell_body_copy_positions`, with `capacity` writable uint32_t.
+SoftshellStatus softshell_body_copy_triangles(const struct SoftshellBody *body,
+                                              uint32_t *out,
+                                              size_t capacity,
+                                              size_t *out_len);
+
+// Copies, for each vertex, the input-mesh vertex it was split from (one uint32_t per vertex;
+// the identity before any fracture). Vertex indices are stable: fracture appends vertices and
+// never renumbers. Buffer rules of `softshell_body_copy_positions` (counts in uint32_t).
+//
+// # Safety
+// As `softshell_body_copy_triangles`.
+SoftshellStatus softshell_body_copy_vertex_origins(const struct SoftshellBody *body,
+                                                   uint32_t *out,
+                                                   size_t capacity,
+                                                   size_t *out_len);
+
+// Copies, for each triangle, its connected piece (fragment) in `0..fragment_count` (one
+// uint32_t per triangle). Buffer rules of `softshell_body_copy_positions` (counts in uint32_t).
+//
+// # Safety
+// As `softshell_body_copy_triangles`.
+SoftshellStatus softshell_body_copy_fragment_ids(const struct SoftshellBody *body,
+                                                 uint32_t *out,
+                                                 size_t capacity,
+                                                 size_t *out_len);
 
 // Continuous collision of vertex `p` against triangle `abc`, each point moving linearly from
 // its first position (`p0`, `a0`, `b0`, `c0`, at t = 0) to its second (`p1`, `a1`, `b1`, `c1`,
@@ -196,6 +795,170 @@ SoftshellStatus softshell_ccd_edge_edge(const double *a0,
                                         int32_t *out_hit,
                                         double *out_toi);
 
+// The default lattice settings (see each field of `SoftshellLatticeDef`), with the private
+// cookie that `softshell_lattice_new` checks. Never fails.
+struct SoftshellLatticeDef softshell_lattice_def_default(void);
+
+// Creates a lattice at rest from `def` and an optional `mask` of `rows * columns` bytes
+// (row-major: entry `row * columns + column`; 1 = particle, 0 = hole). NULL `mask` = a full sheet.
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` when `def` or `out_lattice` is NULL,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` when the def was not made by
+// `softshell_lattice_def_default`, a field is out of range (`region_half_width` = 0, `stiffness`
+// outside (0, 1], `spacing` <= 0, a NaN...) or the mask holds no particle or a value other than
+// 0 and 1 (the message names the field or mask entry), `SOFTSHELL_STATUS_UNSUPPORTED` when built
+// without the `lattice` feature. On success `*out_lattice` receives a new handle to free with
+// `softshell_lattice_free`; on failure it is left unchanged. The mask is copied.
+//
+// # Safety
+// `def` must be NULL or point to a `SoftshellLatticeDef`; `mask` NULL or `rows * columns`
+// readable bytes; `out_lattice` NULL or writable.
+SoftshellStatus softshell_lattice_new(const struct SoftshellLatticeDef *def,
+                                      const uint8_t *mask,
+                                      struct SoftshellLattice **out_lattice);
+
+// Destroys a lattice and stops its worker threads. `softshell_lattice_free(NULL)` does
+// nothing. Freeing a lattice twice is undefined behaviour.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice that is not used again.
+void softshell_lattice_free(struct SoftshellLattice *lattice);
+
+// Pins the particle at (`column`, `row`): from now on it keeps its position and has zero
+// velocity (it still shapes its regions). Pinning twice is harmless. Returns
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` when (column, row) is outside the lattice or a hole.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice.
+SoftshellStatus softshell_lattice_pin(struct SoftshellLattice *lattice,
+                                      uint32_t column,
+                                      uint32_t row);
+
+// Releases a particle pinned by `softshell_lattice_pin` (it starts at rest). Unpinning a
+// particle that is not pinned is harmless. Errors as `softshell_lattice_pin`.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice.
+SoftshellStatus softshell_lattice_unpin(struct SoftshellLattice *lattice,
+                                        uint32_t column,
+                                        uint32_t row);
+
+// Adds `force` (N, float[3]) to the particle at (`column`, `row`) for the next step only:
+// forces given before one step add up, and the step clears them. A force on a pinned particle
+// has no effect. Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL `force`,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a NaN/inf component or a site outside the lattice or
+// in a hole.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `force` NULL or three readable floats.
+SoftshellStatus softshell_lattice_apply_force(struct SoftshellLattice *lattice,
+                                              uint32_t column,
+                                              uint32_t row,
+                                              const float *force);
+
+// Sets the position of every particle from `positions` (x,y,z per particle in particle order,
+// `float_count` = 3 * particle count floats), e.g. to start from a draped or rotated shape.
+// Velocities are kept; the rest shape does not change. Pinned particles move to their new
+// positions too and stay there, so this also drives pins (grab handles) frame by frame. Returns
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` (and changes nothing) for a wrong count or a NaN/inf value.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `positions` NULL or `float_count` readable floats.
+SoftshellStatus softshell_lattice_set_positions(struct SoftshellLattice *lattice,
+                                                const float *positions,
+                                                size_t float_count);
+
+// Advances the lattice by one time step (SPEC 3): shape matching of every region, goals,
+// region damping, gravity and the forces given since the last step, pins.
+// `out_stats` may be NULL; otherwise it receives what the step did.
+//
+// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a value not finite, or a position
+// or speed beyond 1e15): the lattice is then exactly as before the call (the pending forces
+// included) and the message names the particle and the setting to change.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `out_stats` NULL or writable.
+SoftshellStatus softshell_lattice_step(struct SoftshellLattice *lattice,
+                                       struct SoftshellLatticeStats *out_stats);
+
+// Number of particles (sites of the mask that are not holes); 0 for NULL.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice.
+size_t softshell_lattice_particle_count(const struct SoftshellLattice *lattice);
+
+// Number of triangles of the triangulated grid (`softshell_lattice_copy_triangles`): two per
+// lattice cell whose four corners are particles, one per cell with three; 0 for NULL.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice.
+size_t softshell_lattice_triangle_count(const struct SoftshellLattice *lattice);
+
+// Heap bytes the lattice holds (its worker threads' stacks excluded); 0 for NULL. Storage for
+// region damping, pins and forces exists only when they are used.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice.
+size_t softshell_lattice_memory_bytes(const struct SoftshellLattice *lattice);
+
+// Writes to `*out_index` the number of the particle at (`column`, `row`), the index into
+// positions and triangles. Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` when (column, row) is
+// outside the lattice or a hole (then nothing is written).
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `out_index` NULL or writable.
+SoftshellStatus softshell_lattice_particle_index(const struct SoftshellLattice *lattice,
+                                                 uint32_t column,
+                                                 uint32_t row,
+                                                 uint32_t *out_index);
+
+// Copies the positions (x,y,z per particle in particle order, 3 * particle count floats, m)
+// into `out`. If `out` is NULL or `capacity` (in floats) is too small, returns
+// `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
+// nothing else. On success `*out_len` is the number of floats written.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `out` NULL or `capacity` writable floats;
+// `out_len` NULL or writable.
+SoftshellStatus softshell_lattice_copy_positions(const struct SoftshellLattice *lattice,
+                                                 float *out,
+                                                 size_t capacity,
+                                                 size_t *out_len);
+
+// Copies the velocities (m/s, 3 floats per particle) into `out`; buffer rules as
+// `softshell_lattice_copy_positions`.
+//
+// # Safety
+// As `softshell_lattice_copy_positions`.
+SoftshellStatus softshell_lattice_copy_velocities(const struct SoftshellLattice *lattice,
+                                                  float *out,
+                                                  size_t capacity,
+                                                  size_t *out_len);
+
+// Copies the goal positions of the current state (m, 3 floats per particle: where shape
+// matching pulls each particle, SPEC 3) into `out`; buffer rules as
+// `softshell_lattice_copy_positions`. Costs about one step; for inspection and debugging.
+//
+// # Safety
+// As `softshell_lattice_copy_positions`.
+SoftshellStatus softshell_lattice_copy_goals(const struct SoftshellLattice *lattice,
+                                             float *out,
+                                             size_t capacity,
+                                             size_t *out_len);
+
+// Copies the triangulated grid (a,b,c particle indices per triangle, 3 * triangle count
+// uint32_t, counter-clockwise seen from +y at rest) into `out`, e.g. to write the sheet as a
+// mesh. Buffer rules as `softshell_lattice_copy_positions` (capacity and `*out_len` count
+// uint32_t). The triangles never change, so one copy serves every frame.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `out` NULL or `capacity` writable uint32_t;
+// `out_len` NULL or writable.
+SoftshellStatus softshell_lattice_copy_triangles(const struct SoftshellLattice *lattice,
+                                                 uint32_t *out,
+                                                 size_t capacity,
+                                                 size_t *out_len);
+
 // Creates a mesh from arrays: `positions` holds `vertex_count` x,y,z float triples and
 // `triangles` holds `triangle_count` a,b,c index triples (counter-clockwise seen from outside).
 // The arrays are copied; the caller keeps ownership of them.
@@ -236,6 +999,20 @@ SoftshellStatus softshell_mesh_load_obj(const char *path, struct SoftshellMesh *
 // # Safety
 // `mesh` must be NULL or a live mesh; `path` NULL or a NUL-terminated string.
 SoftshellStatus softshell_mesh_save_obj(const struct SoftshellMesh *mesh, const char *path);
+
+// Writes a mesh as an ASCII PLY file with two float properties per vertex, `mean_curvature`
+// and `gaussian_curvature` (as `softshell_mesh_copy_vertex_curvature` computes them), and vertex
+// colours from the one selected by `colour_by` (`SOFTSHELL_CURVATURE_MEAN` or
+// `SOFTSHELL_CURVATURE_GAUSSIAN`): blue for negative, white for zero, red for positive, scaled
+// to the 2nd..98th percentiles. Opens in MeshLab, Blender and ParaView. Overwrites an existing
+// file. Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by` and
+// `SOFTSHELL_STATUS_IO` when the file cannot be written.
+//
+// # Safety
+// `mesh` must be NULL or a live mesh; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_mesh_save_ply(const struct SoftshellMesh *mesh,
+                                        const char *path,
+                                        uint32_t colour_by);
 
 // Destroys a mesh made by `softshell_mesh_from_arrays` or `softshell_mesh_load_obj`.
 // `softshell_mesh_free(NULL)` does nothing. Freeing a mesh twice is undefined behaviour.
@@ -320,6 +1097,210 @@ const char *softshell_status_name(uint32_t status);
 // failed on this thread. Successful calls leave it unchanged. Owned by the library: do not free
 // it; it stays valid until the next call into the library on the same thread. Never NULL.
 const char *softshell_last_error(void);
+
+// The default shell settings (see each field of `SoftshellShellDef`).
+struct SoftshellShellDef softshell_shell_def_default(void);
+
+// The default anisotropic-region settings (see each field of `SoftshellAnisotropyDef`).
+struct SoftshellAnisotropyDef softshell_anisotropy_def_default(void);
+
+// Creates a shell from `mesh` (copied: the mesh may be freed afterwards) with the settings of
+// `def` (made by `softshell_shell_def_default` and edited).
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL argument, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
+// for a def not made by `softshell_shell_def_default`, an unknown kind or a field out of range
+// (the message names the field, its value and the valid range), `SOFTSHELL_STATUS_INVALID_MESH`
+// for a mesh that is not closed, manifold, consistently oriented with outward normals and free
+// of degenerate triangles (the message names the first offending edge or triangle),
+// `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` feature. On success `*out_shell` receives a
+// new handle to free with `softshell_shell_free`; on failure it is left unchanged.
+//
+// # Safety
+// `mesh` must be NULL or a live mesh, `def` NULL or a readable def, `out_shell` NULL or writable.
+SoftshellStatus softshell_shell_new(const struct SoftshellMesh *mesh,
+                                    const struct SoftshellShellDef *def,
+                                    struct SoftshellShell **out_shell);
+
+// Destroys a shell. `softshell_shell_free(NULL)` does nothing; freeing twice is undefined
+// behaviour.
+//
+// # Safety
+// `shell` must be NULL or a live shell that is not used again.
+void softshell_shell_free(struct SoftshellShell *shell);
+
+// Makes the triangles `faces[0..face_count]` (indices into the mesh's triangles, distinct) an
+// anisotropic region with the settings of `def` (SPEC 1.5). Regions may be added at any time;
+// a face may belong to several regions. Storage for anisotropy exists only once a region is
+// added (see `softshell_shell_memory_bytes`).
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL shell or def or NULL faces with a count,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an empty region, a face out of range or repeated, a
+// def not made by `softshell_anisotropy_def_default` or a field out of range. Nothing changes
+// on failure.
+//
+// # Safety
+// `shell` must be NULL or a live shell; `faces` NULL or `face_count` readable uint32_t; `def`
+// NULL or a readable def.
+SoftshellStatus softshell_shell_add_anisotropic_region(struct SoftshellShell *shell,
+                                                       const uint32_t *faces,
+                                                       size_t face_count,
+                                                       const struct SoftshellAnisotropyDef *def);
+
+// Advances the shell by one time step (SPEC 1.1): pressure, prediction, `iterations`
+// Gauss-Seidel sweeps over the membrane, bending and anisotropic constraints, (collisions),
+// velocity update, volume ratio, all `substeps` times.
+//
+// `out_stats` may be NULL. When it is not, the energies and the residual are evaluated after
+// the last iteration (one extra pass over the constraints) and the stats are written there.
+// Once the shell is finished (volume ratio below `stop_volume_ratio`) a step does nothing and
+// returns the last stats with `finished` true and `step_seconds` 0.
+//
+// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a position became NaN or moved
+// more than two bounding-box diagonals): the shell is rolled back to its state before the step
+// and the message says what blew up and which settings would be stable. `out_stats` is then
+// not written.
+//
+// # Safety
+// `shell` must be NULL or a live shell; `out_stats` NULL or writable.
+SoftshellStatus softshell_shell_step(struct SoftshellShell *shell,
+                                     struct SoftshellShellStats *out_stats);
+
+// Number of vertices of the shell (the mesh's); 0 for NULL.
+//
+// # Safety
+// `shell` must be NULL or a live shell.
+size_t softshell_shell_vertex_count(const struct SoftshellShell *shell);
+
+// Copies the current positions (x,y,z per vertex, `3 * vertex_count` floats) into `out`.
+// If `out` is NULL or `capacity` (in floats) is too small, returns
+// `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
+// nothing else. On success `*out_len` is the number of floats written.
+//
+// # Safety
+// `shell` must be NULL or a live shell; `out` NULL or `capacity` writable floats; `out_len`
+// NULL or writable.
+SoftshellStatus softshell_shell_copy_positions(const struct SoftshellShell *shell,
+                                               float *out,
+                                               size_t capacity,
+                                               size_t *out_len);
+
+// Copies the membrane (elastic) energy of each triangle, J, in mesh triangle order (one float
+// per triangle), with the buffer rules of `softshell_shell_copy_positions`. Computed from the
+// current positions when called.
+//
+// # Safety
+// As `softshell_shell_copy_positions`.
+SoftshellStatus softshell_shell_copy_face_energy(const struct SoftshellShell *shell,
+                                                 float *out,
+                                                 size_t capacity,
+                                                 size_t *out_len);
+
+// Copies one curvature value per vertex of the current shape: `kind` is
+// `SOFTSHELL_CURVATURE_MEAN` (1/m) or `SOFTSHELL_CURVATURE_GAUSSIAN` (1/m^2), as in
+// `softshell_mesh_copy_vertex_curvature`; any other kind is `SOFTSHELL_STATUS_INVALID_ARGUMENT`.
+// Buffer rules as `softshell_shell_copy_positions` (one float per vertex).
+//
+// # Safety
+// As `softshell_shell_copy_positions`.
+SoftshellStatus softshell_shell_copy_vertex_curvature(const struct SoftshellShell *shell,
+                                                      uint32_t kind,
+                                                      float *out,
+                                                      size_t capacity,
+                                                      size_t *out_len);
+
+// Bytes held by the shell: its handle, rest data, state, scratch and worker pool bookkeeping.
+// Only what the scene uses is allocated: no bending data with `SOFTSHELL_BENDING_NONE`, no
+// anisotropy data before a region is added, no multipliers with the PBD solver, no pool with
+// `threads = 1`. 0 for NULL.
+//
+// # Safety
+// `shell` must be NULL or a live shell.
+size_t softshell_shell_memory_bytes(const struct SoftshellShell *shell);
+
+// Writes the shell's current shape as an ASCII PLY file with four float properties per
+// vertex: `mean_curvature` (1/m), `gaussian_curvature` (1/m^2), `energy` (membrane energy, J: a
+// third of each adjacent triangle's, so the vertex values sum to the total) and
+// `pressure_force` (N, the magnitude of the pressure force of SPEC 1.2), and vertex colours
+// from the one selected by `colour_by` (`SOFTSHELL_SHELL_PLY_MEAN_CURVATURE`,
+// `_GAUSSIAN_CURVATURE`, `_ENERGY` or `_PRESSURE_FORCE`): blue-white-red for signed values,
+// dark blue to yellow otherwise, scaled to the 2nd..98th percentiles. These are the pictures of
+// the paper's Fig. 8 and 10. Overwrites an existing file.
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL shell or path,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+// file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` feature. The shell
+// is not changed.
+//
+// # Safety
+// `shell` must be NULL or a live shell; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_shell_save_ply(const struct SoftshellShell *shell,
+                                         const char *path,
+                                         uint32_t colour_by);
+
+// Writes the shell's current shape as a Wavefront OBJ file (1-based `f a b c` lines, the
+// mesh's triangles): one file per frame makes a sequence that Blender and MeshLab import.
+// Overwrites an existing file. Returns `SOFTSHELL_STATUS_IO` when the file cannot be written,
+// `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` or `obj` feature.
+//
+// # Safety
+// `shell` must be NULL or a live shell; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_shell_save_obj(const struct SoftshellShell *shell, const char *path);
+
+// Writes the body's current surface (after fracture: every piece, split vertices included) as
+// an ASCII PLY file with four float properties per vertex, in this order: `speed` (m/s),
+// `fragment_shade` (a value in [0, 1) that differs between neighbouring fragment numbers, for
+// colours), `mean_curvature` (1/m) and `fragment` (the connected piece, as
+// `softshell_body_copy_fragment_ids` numbers them; -1 for a vertex no triangle uses), and
+// vertex colours from the one
+// selected by `colour_by` (`SOFTSHELL_BODY_PLY_SPEED`, `_FRAGMENT` or `_MEAN_CURVATURE`).
+// Overwrites an existing file.
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL body or path,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+// file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `body` feature. The body is
+// not changed.
+//
+// # Safety
+// `body` must be NULL or a live body; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_body_save_ply(const struct SoftshellBody *body,
+                                        const char *path,
+                                        uint32_t colour_by);
+
+// Writes the body's current surface as a Wavefront OBJ file (every piece; vertex k is vertex k
+// of `softshell_body_copy_positions`). Overwrites an existing file. Returns
+// `SOFTSHELL_STATUS_IO` when the file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without
+// the `body` or `obj` feature.
+//
+// # Safety
+// `body` must be NULL or a live body; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_body_save_obj(const struct SoftshellBody *body, const char *path);
+
+// Writes the lattice's current sheet (its triangulated grid) as an ASCII PLY file with three
+// float properties per particle: `height` (y, m: the displacement from the rest plane),
+// `speed` (m/s) and `goal_distance` (|g - x|, m: where the sheet is strained), and vertex
+// colours from the one selected by `colour_by` (`SOFTSHELL_LATTICE_PLY_HEIGHT`, `_SPEED` or
+// `_GOAL_DISTANCE`). Computing the goals costs about one step. Overwrites an existing file.
+//
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL lattice or path,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+// file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `lattice` feature. The
+// lattice is not changed.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_lattice_save_ply(const struct SoftshellLattice *lattice,
+                                           const char *path,
+                                           uint32_t colour_by);
+
+// Writes the lattice's current sheet (its triangulated grid, as
+// `softshell_lattice_copy_triangles`) as a Wavefront OBJ file. Overwrites an existing file.
+// Returns `SOFTSHELL_STATUS_IO` when the file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED`
+// without the `lattice` or `obj` feature.
+//
+// # Safety
+// `lattice` must be NULL or a live lattice; `path` NULL or a NUL-terminated string.
+SoftshellStatus softshell_lattice_save_obj(const struct SoftshellLattice *lattice,
+                                           const char *path);
 
 #ifdef __cplusplus
 }  // extern "C"
