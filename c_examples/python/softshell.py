@@ -244,6 +244,7 @@ class ShellStats(_Struct):
         ("ccd_tests", ctypes.c_uint64),
         ("contacts", ctypes.c_uint64),
         ("step_seconds", ctypes.c_double),
+        ("stalled", ctypes.c_bool),
     ]
 
 
