@@ -146,6 +146,7 @@ from fractions import Fraction
 import numpy as np
 import ipctk
 root, passes, repeat = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+ipctk.set_logger_level(ipctk.LoggerLevel.error)
 ccd = ipctk.TightInclusionCCD()
 def load(path):
     rows = []
@@ -186,7 +187,7 @@ fn run_ipctk(venv: &std::path::Path) -> Option<[(Summary, Vec<f64>); 2]> {
     }
     let data = ccd_queries::data_dir();
     let output =
-        match std::process::Command::new(&python).arg("-c").arg(IPCTK_SCRIPT).arg(&data).args(["2", "3"]).output() {
+        match std::process::Command::new(&python).arg("-c").arg(IPCTK_SCRIPT).arg(&data).args(["1", "3"]).output() {
             Ok(output) => output,
             Err(error) => {
                 println!("ipctk: could not run {}: {error}", python.display());
@@ -200,9 +201,8 @@ fn run_ipctk(venv: &std::path::Path) -> Option<[(Summary, Vec<f64>); 2]> {
     let mut result = [(Summary::default(), Vec::new()), (Summary::default(), Vec::new())];
     for line in String::from_utf8_lossy(&output.stdout).lines() {
         let cols: Vec<&str> = line.split_whitespace().collect();
-        if cols.len() != 5 {
-            println!("ipctk: unexpected output line {line:?}");
-            return None;
+        if cols.len() != 5 || !(cols[0] == "vf" || cols[0] == "ee") {
+            continue; // a log line of the library
         }
         let kind = if cols[0] == "vf" { 0 } else { 1 };
         let (Ok(ns), Ok(base)) = (cols[1].parse::<f64>(), cols[2].parse::<f64>()) else {
