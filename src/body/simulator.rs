@@ -527,7 +527,7 @@ impl Body {
             }
             Scratch::Implicit(s) => {
                 let max_iterations = (10 * self.settings.iterations as usize).max(40);
-                implicit::substep(&model, gas, x, v, h, max_iterations, &self.pool, s)
+                implicit::substep(&model, gas, x, v, h, max_iterations, &self.pool, &self.obstacles, s)
             }
             Scratch::Xpbd(s) => (xpbd::substep(&model, gas, x, v, h, self.settings.iterations, &self.obstacles, s), 0),
         };
