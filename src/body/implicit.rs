@@ -10,6 +10,7 @@ use glam::Vec3;
 
 use super::forces::{Model, all_forces};
 use super::gas::Gas;
+use super::obstacles::{Obstacle, touching};
 use super::springs::spring_block;
 use crate::parallel::WorkerPool;
 
@@ -32,6 +33,8 @@ pub(crate) struct ImplicitScratch {
     gas_dot: Vec<f64>,
     /// Δv of the previous substep (the warm start), reset when the vertex count changes.
     previous_dv: Vec<Vec3>,
+    /// Contact normal of each vertex resting on an obstacle (only with obstacles).
+    contact: Vec<Option<Vec3>>,
 }
 
 impl ImplicitScratch {
@@ -47,6 +50,7 @@ impl ImplicitScratch {
             + self.diag.capacity()
             + self.previous_dv.capacity())
             * 12
+            + self.contact.capacity() * std::mem::size_of::<Option<Vec3>>()
             + self.blocks.capacity() * 20
             + (self.gas_coef.capacity() + self.gas_dot.capacity()) * 8
     }
@@ -111,6 +115,7 @@ fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
 }
 
 /// One substep of length `h`; returns (wind work in J, conjugate-gradient iterations).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn substep(
     model: &Model,
     mut gas: Option<&mut Gas>,
@@ -119,6 +124,7 @@ pub(crate) fn substep(
     h: f32,
     max_iterations: usize,
     pool: &WorkerPool,
+    obstacles: &[Obstacle],
     s: &mut ImplicitScratch,
 ) -> (f64, usize) {
     let n = x.len();
@@ -194,6 +200,35 @@ pub(crate) fn substep(
     for i in 0..n {
         s.dv[i] = if model.inv_mass[i] == 0.0 { Vec3::ZERO } else { s.previous_dv[i] };
     }
+    // Contacts inside the solve (Baraff and Witkin 1998, modified PCG): a vertex resting on an
+    // obstacle, moving and pushed into it, gets the constraint (v + Δv)·n = 0; its normal component is
+    // filtered out of the residual and the search directions. Restitution and friction follow
+    // after the solve, with the other integrators' contact response.
+    s.contact.clear();
+    let mut any_contact = false;
+    if !obstacles.is_empty() {
+        s.contact.resize(n, None);
+        for i in 0..n {
+            if model.inv_mass[i] > 0.0 {
+                if let Some(normal) = touching(x[i], obstacles, 1e-6) {
+                    // Released when moving away or pulled away (the contact cannot pull).
+                    if v[i].dot(normal) <= 0.0 && s.force[i].dot(normal) <= 0.0 {
+                        s.contact[i] = Some(normal);
+                        any_contact = true;
+                        let dv = s.dv[i];
+                        s.dv[i] = dv - normal * (dv.dot(normal) + v[i].dot(normal));
+                    }
+                }
+            }
+        }
+    }
+    let filter = |values: &mut [Vec3], contact: &[Option<Vec3>]| {
+        for (value, c) in values.iter_mut().zip(contact) {
+            if let Some(normal) = c {
+                *value -= *normal * value.dot(*normal);
+            }
+        }
+    };
     let mut ap = std::mem::take(&mut s.ap);
     let mut gas_dot = std::mem::take(&mut s.gas_dot);
     apply(model, pool, gas.as_deref(), s, &s.dv, &mut ap, &mut gas_dot);
@@ -203,10 +238,19 @@ pub(crate) fn substep(
     for d in s.diag.iter_mut() {
         *d = Vec3::ONE / d.max(Vec3::splat(f32::MIN_POSITIVE));
     }
-    let mut rz = 0.0f64;
     for i in 0..n {
         s.r[i] = s.rhs[i] - s.ap[i];
-        s.z[i] = s.r[i] * s.diag[i];
+    }
+    if any_contact {
+        filter(&mut s.r, &s.contact);
+    }
+    let mut rz = 0.0f64;
+    for i in 0..n {
+        let mut z = s.r[i] * s.diag[i];
+        if let Some(Some(normal)) = s.contact.get(i) {
+            z -= *normal * z.dot(*normal);
+        }
+        s.z[i] = z;
         rz += s.r[i].dot(s.z[i]) as f64;
     }
     s.p.copy_from_slice(&s.z);
@@ -219,6 +263,9 @@ pub(crate) fn substep(
             iterations += 1;
             let mut ap = std::mem::take(&mut s.ap);
             apply(model, pool, gas.as_deref(), s, &s.p, &mut ap, &mut gas_dot);
+            if any_contact {
+                filter(&mut ap, &s.contact);
+            }
             s.ap = ap;
             let pap = dot(&s.p, &s.ap);
             if pap <= 0.0 || !pap.is_finite() {
@@ -230,7 +277,11 @@ pub(crate) fn substep(
             for i in 0..n {
                 s.dv[i] += s.p[i] * alpha;
                 s.r[i] -= s.ap[i] * alpha;
-                s.z[i] = s.r[i] * s.diag[i];
+                let mut z = s.r[i] * s.diag[i];
+                if let Some(Some(normal)) = s.contact.get(i) {
+                    z -= *normal * z.dot(*normal);
+                }
+                s.z[i] = z;
                 rr += s.r[i].length_squared() as f64;
                 rz_next += s.r[i].dot(s.z[i]) as f64;
             }
@@ -247,8 +298,8 @@ pub(crate) fn substep(
     s.gas_dot = gas_dot;
     // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling term
     // of the matrix sums to zero); a truncated solve leaves a small error there, removed by a
-    // uniform correction. Not with pins: their reactions are external forces.
-    if model.inv_mass.iter().zip(model.mass).all(|(&w, &m)| w > 0.0 || m == 0.0) {
+    // uniform correction. Not with pins or contacts: their reactions are external forces.
+    if !any_contact && model.inv_mass.iter().zip(model.mass).all(|(&w, &m)| w > 0.0 || m == 0.0) {
         let (mut error, mut mass) = (glam::DVec3::ZERO, 0.0f64);
         for i in 0..n {
             error += s.rhs[i].as_dvec3() - s.dv[i].as_dvec3() * model.mass[i] as f64;
