@@ -77,7 +77,6 @@ fn lattice_extremes_are_finite_or_fail_cleanly() {
 /// two steps, and `softshell_body_step` still returns OK (SPEC 2.2 asks for UNSTABLE with the state
 /// rolled back). Un-ignore once the body's divergence check catches it.
 #[test]
-#[ignore = "known body simulator bug: a finite blow-up is not reported as UNSTABLE"]
 fn body_blow_up_is_reported_unstable() {
     use report_util::*;
     use softshell::ffi::body::*;
@@ -109,7 +108,6 @@ fn body_blow_up_is_reported_unstable() {
 /// default settings on data/eight.obj turns the shell inside out (V/V0 < 0) while every step
 /// returns OK. Un-ignore once the shell reports it (UNSTABLE with rollback) or prevents it.
 #[test]
-#[ignore = "known shell bug: an inverted shell is not reported"]
 fn shell_inversion_is_reported_unstable() {
     use report_util::*;
     let (p, t) = unit_obj("eight.obj", 1.0);
