@@ -11,6 +11,7 @@
 mod report_util;
 
 mod figures;
+mod findings;
 mod plot;
 mod scenes;
 
@@ -20,6 +21,7 @@ use plot::Series;
 use report_util::cases;
 
 /// One measured run: its family (one curve), its setting (one point), wall time and error.
+#[derive(Clone)]
 pub struct Run {
     pub family: String,
     pub setting: String,
@@ -105,7 +107,7 @@ fn main() {
     )
     .unwrap();
 
-    writeln!(md, "\n## 1. Shell (SPEC 1)\n\n{}", scenes::SHELL_SCENE).unwrap();
+    writeln!(md, "\n## 1. Shell (SPEC 1)\n\n{}", scenes::shell_scene()).unwrap();
     let (inflate, contract) = scenes::shell_runs();
     section(&mut md, "Shell: inflated sphere against its analytic equilibrium", "relative scale error", &inflate, None);
     section(
@@ -116,12 +118,13 @@ fn main() {
         None,
     );
     writeln!(md, "\n**f32 stall** (default contraction, V/V0 after 10 steps of 1/60 s; it should converge as substeps grow):\n\n| substeps | V/V0 |\n|---:|---:|").unwrap();
-    for (sub, r) in scenes::shell_substep_stall() {
+    let stall = scenes::shell_substep_stall();
+    for &(sub, r) in &stall {
         writeln!(md, "| {sub} | {r:.6} |").unwrap();
     }
     plot_families(
         &mut md,
-        &[("inflation: ", inflate), ("contraction: ", contract)],
+        &[("inflation: ", inflate), ("contraction: ", contract.clone())],
         "shell_error_vs_time.svg",
         "shell: error vs wall time (2 scenes)",
     );
@@ -136,10 +139,10 @@ fn main() {
         &spring,
         None,
     );
-    writeln!(md, "\n{}", scenes::BODY_GAS_SCENE).unwrap();
+    writeln!(md, "\n{}", scenes::body_gas_scene()).unwrap();
     let gas = scenes::body_gas_runs();
     section(&mut md, "Body: gas sphere against its analytic equilibrium radius", "relative radius error", &gas, None);
-    writeln!(md, "\n{}", scenes::BODY_REF_SCENE).unwrap();
+    writeln!(md, "\n{}", scenes::body_ref_scene()).unwrap();
     let body = scenes::body_reference_runs();
     section(
         &mut md,
@@ -150,7 +153,7 @@ fn main() {
     );
     plot_families(
         &mut md,
-        &[("spring: ", spring), ("gas radius: ", gas), ("inflation: ", body)],
+        &[("spring: ", spring.clone()), ("gas radius: ", gas.clone()), ("inflation: ", body.clone())],
         "body_error_vs_time.svg",
         "body: error vs wall time (3 scenes)",
     );
@@ -176,7 +179,7 @@ fn main() {
     eprintln!("lattice done at {:.0} s", start.elapsed().as_secs_f64());
 
     writeln!(md, "\n## 4. The paper's figures (SPEC 1.8)\n").unwrap();
-    figures::all(&mut md);
+    let figs = figures::all(&mut md);
     eprintln!("figures done at {:.0} s", start.elapsed().as_secs_f64());
 
     writeln!(md, "\n## 5. Stability: case x setting (SPEC 4, same cases as tests/stability.rs)\n").unwrap();
@@ -228,7 +231,16 @@ fn main() {
         }
         writeln!(md, "\n</details>").unwrap();
     }
-    writeln!(md, "\n{}", scenes::FINDINGS).unwrap();
+    let observed = findings::Observed {
+        stall: &stall,
+        shell_contract: &contract,
+        body_spring: &spring,
+        body_gas: &gas,
+        body_reference: &body,
+        rows: &rows,
+        figs: &figs,
+    };
+    writeln!(md, "\n{}", findings::findings(&observed)).unwrap();
     writeln!(md, "\nWhole bench: {:.0} s.", start.elapsed().as_secs_f64()).unwrap();
     let path = format!("{}/report/error_vs_time.md", env!("CARGO_MANIFEST_DIR"));
     std::fs::write(&path, &md).unwrap();

@@ -13,17 +13,69 @@ use crate::report_util::*;
 
 // ------------------------------------------------------------------------------------------ shell
 
-pub const SHELL_SCENE: &str = "Analytic scene: data/sphere.obj (482 vertices) scaled to a unit \
-bounding-box diagonal, inflated by pressure -0.5 Pa (inside over outside), StVK with E = 1000 Pa, \
-nu = 0.3, t = 1 mm, no bending, damping 3/s, run 4 s until it settles. For a uniform scale s the \
-membrane energy is A0 t 2 (mu + lambda) e^2 with e = (s^2 - 1)/2 (plane-stress lambda), so the \
-equilibrium solves 2 A0 t (mu + lambda) (s^2 - 1) = 3 |P| V0 s (A0, V0 the mesh's area and \
-volume). Error: |cbrt(V/V0) / s - 1| at t = 4 s. \
-Reference scene: the default contraction (pressure 0.5, kB = 1e-2, isometric bending with rest \
-curvature, damping 3/s) of the same sphere for 1/3 s (20 steps of 1/60 s, before it buckles), \
-collisions off. Reference: h = 1/60 s with 16 substeps and 40 iterations (more substeps are not \
-a better reference: see the f32 stall in the findings). Error: RMS vertex distance to the \
-reference at t = 1/3 s, relative to the diagonal (1). The note gives V/V0 at the end.";
+/// The shell scenes' description, with the library defaults read from
+/// `softshell_shell_def_default()` (never written as literals).
+pub fn shell_scene() -> String {
+    let d = softshell_shell_def_default();
+    let i = inflate_base();
+    format!(
+        "Analytic scene: data/sphere.obj (482 vertices) scaled to a unit bounding-box diagonal, \
+         inflated by pressure {} Pa (inside over outside), StVK with E = {} Pa, nu = {}, t = {} m, \
+         no bending, damping {}/s (the default), run {INFLATE_T} s until it settles. For a uniform \
+         scale s the membrane energy is A0 t 2 (mu + lambda) e^2 with e = (s^2 - 1)/2 (plane-stress \
+         lambda), so the equilibrium solves 2 A0 t (mu + lambda) (s^2 - 1) = 3 |P| V0 s (A0, V0 the \
+         mesh's area and volume). Error: |cbrt(V/V0) / s - 1| at t = {INFLATE_T} s. Reference scene: \
+         the default contraction (from `softshell_shell_def_default()`: pressure {}, {}, kB = {}, \
+         {} bending, damping {}/s, {} iterations, h = 1/{:.0} s) of the same sphere for 1/3 s \
+         (20 steps of 1/60 s, before it buckles), collisions off. Reference: 16 substeps and 40 \
+         iterations (more substeps are not a better reference: see the f32 stall table). Error: RMS \
+         vertex distance to the reference at t = 1/3 s, relative to the diagonal (1). The note gives \
+         V/V0 at the end.",
+        i.pressure,
+        i.youngs_modulus,
+        i.poisson_ratio,
+        i.thickness,
+        i.damping,
+        d.pressure,
+        material_name(d.material),
+        d.bending_coefficient,
+        bending_name(d.bending),
+        d.damping,
+        d.iterations,
+        1.0 / d.time_step,
+    )
+}
+
+/// The name of a shell material constant.
+pub fn material_name(m: u32) -> &'static str {
+    match m {
+        SOFTSHELL_MATERIAL_STVK => "StVK",
+        SOFTSHELL_MATERIAL_COROTATED => "corotated",
+        SOFTSHELL_MATERIAL_LINEAR => "linear",
+        SOFTSHELL_MATERIAL_MOONEY_RIVLIN => "Mooney-Rivlin",
+        _ => "unknown material",
+    }
+}
+
+/// The name of a shell bending constant.
+pub fn bending_name(b: u32) -> &'static str {
+    match b {
+        SOFTSHELL_BENDING_NONE => "no",
+        SOFTSHELL_BENDING_ISOMETRIC => "isometric (flat rest)",
+        SOFTSHELL_BENDING_ISOMETRIC_REST => "isometric-with-rest-curvature",
+        _ => "unknown",
+    }
+}
+
+/// The name of a shell solver constant.
+pub fn solver_name(s: u32) -> &'static str {
+    match s {
+        SOFTSHELL_SOLVER_XPBD => "XPBD",
+        SOFTSHELL_SOLVER_PBD => "PBD",
+        SOFTSHELL_SOLVER_PBD_DISTANCE => "PBD edge-distance",
+        _ => "unknown solver",
+    }
+}
 
 const SHELL_T: f64 = 20.0 / 60.0;
 const INFLATE_T: f64 = 4.0;
@@ -286,12 +338,20 @@ pub fn body_spring_runs() -> Vec<Run> {
     runs
 }
 
-pub const BODY_GAS_SCENE: &str = "Analytic scene 2: data/sphere.obj (482 vertices, 1440 springs) \
-scaled to a unit diagonal, gas nRT = 1 J, K_s = 1000 N/m, K_d = 5 N s/m, 1 kg, no gravity, run 3 s \
-from rest until it settles. For a uniform scale s of the rest shape, spring energy K_s/2 (s-1)^2 \
-sum L0^2 and gas energy -nRT ln V are stationary at K_s (s - 1) s sum L0^2 = 3 nRT: the analytic \
-equilibrium radius s R0 (exact for uniform scaling; the polyhedron's residual non-uniformity is \
-part of the floor). Error: |mean radius / (s R0) - 1| at t = 3 s.";
+/// Scene 2's description; K_s and the mass are the library defaults, read from
+/// `softshell_body_def_default()`.
+pub fn body_gas_scene() -> String {
+    let d = gas_base(SOFTSHELL_INTEGRATOR_XPBD);
+    format!(
+        "Analytic scene 2: data/sphere.obj (482 vertices, 1440 springs) scaled to a unit diagonal, gas \
+         nRT = {} J, K_s = {} N/m (default), K_d = {} N s/m, {} kg (default), no gravity, run 3 s \
+         from rest until it settles. For a uniform scale s of the rest shape, spring energy \
+         K_s/2 (s-1)^2 sum L0^2 and gas energy -nRT ln V are stationary at K_s (s - 1) s sum L0^2 = \
+         3 nRT: the analytic equilibrium radius s R0 (exact for uniform scaling; the polyhedron's \
+         residual non-uniformity is part of the floor). Error: |mean radius / (s R0) - 1| at t = 3 s.",
+        d.gas_amount, d.spring_stiffness, d.spring_damping, d.total_mass
+    )
+}
 
 fn sphere_springs_sum_sq(p: &[f32], t: &[u32]) -> f64 {
     let mut edges: Vec<(u32, u32)> =
@@ -352,11 +412,22 @@ pub fn body_gas_runs() -> Vec<Run> {
     runs
 }
 
-pub const BODY_REF_SCENE: &str = "Reference scene: the same gas sphere (nRT = 1 J, K_s = 1000 N/m, \
-K_d = 1 N s/m, 1 kg, no gravity) inflating from rest for 0.5 s, with an impulse on vertex 0 at the \
-start. Reference: symplectic Euler at h = 1/60 s with 256 substeps (its stability limit 2/w_max is \
-about 1e-3 s; the reference step is 6.5e-5 s). Error: RMS vertex distance to the reference at \
-t = 0.5 s / diagonal.";
+/// The reference scene's description (defaults read from `softshell_body_def_default()`).
+pub fn body_ref_scene() -> String {
+    let d = SoftshellBodyDef { spring_damping: 1.0, ..gas_base(SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER) };
+    format!(
+        "Reference scene: the same gas sphere (nRT = {} J, K_s = {} N/m, K_d = {} N s/m, {} kg, no \
+         gravity) inflating from rest for 0.5 s, with an impulse on vertex 0 at the start. Reference: \
+         symplectic Euler at h = 1/{:.0} s with 256 substeps (step {:.1e} s). Error: RMS vertex \
+         distance to the reference at t = 0.5 s / diagonal.",
+        d.gas_amount,
+        d.spring_stiffness,
+        d.spring_damping,
+        d.total_mass,
+        1.0 / d.time_step,
+        d.time_step / 256.0
+    )
+}
 
 fn reference_run(def: &SoftshellBodyDef) -> Result<(f64, Vec<f32>), String> {
     let (p, t) = unit_obj("sphere.obj", 1.0);
@@ -539,56 +610,3 @@ pub fn lattice_reference_runs() -> Vec<Run> {
     }
     runs
 }
-
-pub const FINDINGS: &str = "## 6. Findings and gaps
-
-- **Body bug (not fixed here, reproducer `cargo test --release --test stability -- --ignored`):**
-  explicit and symplectic Euler blow up to positions of 1e4..1e7 m and energies of 1e15..1e27 J
-  within a few steps on the extreme cases (K_s 1e2 and 1e9 N/m with gas, h = 0.1 s, gas x1e4,
-  slivers, the tetrahedron, ...) and `softshell_body_step` still returns OK: the divergence
-  check (NaN or energy growing without a source, SPEC 2.2) does not catch a blow-up that stays
-  finite. The same happens to implicit Euler after most springs of the sphere break in one step
-  (960 loose triangles with gas). XPBD keeps the contract in every case.
-- **Shell bug (f32 stall with many substeps):** with `substeps` >= 128 at h = 1/60 s (substep
-  1.3e-4 s) the default contraction does not move at all (V/V0 stays exactly 1), and from about
-  64 substeps on it is already wrong (see the stall table in section 1). The first prediction
-  `x + h^2 w f` is below half an f32 ulp of the positions and the velocity is rebuilt from the
-  rounded positions `(p - x)/h`, so it stays 0. Reproducer: the shell scene above with
-  `substeps = 128`. Positions (or at least the predicted displacement) need more precision, or
-  the velocity should be integrated rather than rebuilt from rounded positions.
-- **Shell: an anisotropic region with the default settings turns data/eight.obj inside out**
-  (V/V0 = -6.9 after 100 steps, Fig. 20; with push 0.05 it still reaches -1.1, ARAP and Sqrt
-  identical as SPEC 1.5 says they must be) and every step returns OK: the divergence check only
-  looks at NaN and per-substep moves over two diagonals, not at an inverted volume. The caved-in
-  region passes through the other side because there is no collision stage yet; only active
-  contraction (target stretch 0.7, no push) stays positive (0.09).
-- **Expected, not bugs:** implicit Euler and XPBD lose most of the triangle's oscillation
-  (error 0.92 of the amplitude at h = 1/60 s: backward Euler's numerical damping,
-  1/sqrt(1 + w^2 h^2) per step); explicit Euler gains it (error 6.7) but stays under the
-  divergence check on this small scene; symplectic Euler converges at second order in the
-  amplitude error here (0.057 -> 0.014 -> 0.0035 as h halves).
-- **Floors:** the body's XPBD gets worse past 16 substeps on the inflating sphere (1.1e-4 at 16,
-  5.2e-4 at 64) and the shell's contraction error flattens near 1e-4: both look like f32 round-off
-  in positions at tiny substeps (see the shell stall above), which also limits how fine a
-  reference can be.
-- **Shell collisions:** the collision stage is not implemented (`collision_candidates`,
-  `ccd_tests`, `contacts` stay 0, as documented in the header), so no Table-2-style culling table
-  can be measured; it is left out rather than faked.
-- **Fig. 14 (energy vs edge-distance constraints):** the shell has no edge-distance constraint
-  mode, so the comparison cannot be run; it is left out rather than faked.
-- **Body: zero-area triangles are rejected only with gas.** Without gas (cloth) a triangle
-  with three distinct but collinear corners is accepted (SPEC 4 asks for rejection with the
-  index); implicit Euler and XPBD stay finite on it.
-- **Fig. 13 is not reproduced with the default parameters:** the volume ratio after 100 steps
-  depends on the initial volume (for example StVK, XPBD: 0.35 / 0.19 / 0.41 at V0 / V0/4 / V0/16;
-  in the PBD form the smaller copies even turn inside out). The meshes are scaled but pressure
-  and density are not (the def says only the ratios pressure : E t : density t matter); the
-  paper's claim is not checked beyond that.
-- **Fig. 17** follows the paper: kB = 1 and 1e-1 barely contract and jitter (the ratio rose in
-  56 and 45 of 100 steps), kB = 1e-2 falls smoothly, kB = 1e-3 is close to kB = 0.
-- **threads = 1 holds no pool, but the evidence is thin:** `*_memory_bytes` of a 2-thread shell,
-  body or lattice is only 8 bytes more than a 1-thread one (the worker threads' stacks are not
-  counted), so tests/leave_out.rs can show no more than that.
-- **Lattice stats** have no per-stage counter (region damping, pins, forces): tests/leave_out.rs
-  shows the work skipped only through memory and results, not a counter.
-- Not measured: meshes of 1M triangles (too slow for this bench on 2 cores).";
