@@ -86,8 +86,8 @@ pub fn findings(o: &Observed) -> String {
                 .collect();
             item(format!(
                 "**{sim} bug: {} stability case(s) broke the contract** (a step returned OK on a blown-up \
-                 or non-finite state, or did not roll back; reproducer `cargo test --release --test stability \
-                 -- --ignored`): {}.",
+                 or non-finite state, or did not roll back; the same rows run in `cargo test --release \
+                 --test stability -- --nocapture`, which fails on any not allow-listed): {}.",
                 broken.len(),
                 list.join("; ")
             ));
@@ -249,7 +249,7 @@ pub fn findings(o: &Observed) -> String {
     // f32 stall.
     if let (Some(first), Some(last)) = (o.stall.first(), o.stall.last()) {
         let stuck: Vec<String> =
-            o.stall.iter().filter(|(_, r)| (r - first.1).abs() > 0.01).map(|(s, r)| format!("{s} ({r:.4})")).collect();
+            o.stall.iter().filter(|(_, r)| (r - first.1).abs() > 0.01).map(|(s, r)| format!("{s}: {r:.4}")).collect();
         if stuck.is_empty() {
             item(format!(
                 "**Shell, many substeps:** V/V0 after 10 steps stays within 0.01 of the 16-substep value \
@@ -259,11 +259,12 @@ pub fn findings(o: &Observed) -> String {
         } else {
             item(format!(
                 "**Shell bug (f32 stall with many substeps):** the default contraction gives V/V0 {:.4} \
-                 after 10 steps at {} substeps but {} at the substep counts {}; at {} substeps it is \
-                 {:.6}{}. The per-substep displacement falls below the positions' f32 resolution.",
+                 after 10 steps at {} substeps, but more than 0.01 away at (substeps: V/V0) {}; at {} \
+                 substeps it is {:.6}{}. The per-substep displacement falls below the positions' f32 \
+                 resolution. Reproducer: `cargo test --release --test stability -- --ignored \
+                 shell_many_substeps_still_contract`.",
                 first.1,
                 first.0,
-                if last.1 > first.1 { "more" } else { "different values" },
                 stuck.join(", "),
                 last.0,
                 last.1,
