@@ -281,7 +281,12 @@ fn main() {
         ("symplectic Euler, 40 subst., K_d 0.5", SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, 40, 2, 1.0 / 60.0),
         ("explicit Euler, 40 subst., K_d 0.5", SOFTSHELL_INTEGRATOR_EXPLICIT_EULER, 40, 2, 1.0 / 60.0),
     ];
+    // BODY_ONLY=implicit runs only the implicit Euler rows (for quick comparisons).
+    let only_implicit = std::env::var("BODY_ONLY").is_ok_and(|v| v == "implicit");
     for (name, integrator, substeps, iterations, h) in configs {
+        if only_implicit && integrator != SOFTSHELL_INTEGRATOR_IMPLICIT_EULER {
+            continue;
+        }
         let mut d = base;
         d.integrator = integrator;
         d.substeps = substeps;
@@ -306,6 +311,9 @@ fn main() {
                 println!("{name:<34} {:>9.2} UNSTABLE ({})", r.ms_per_step, f.chars().take(120).collect::<String>())
             }
         }
+    }
+    if only_implicit {
+        return;
     }
     // Cost of a cracking step: springs break at 2 % strain beyond what the settled ball has.
     let mut d = base;

@@ -6,7 +6,7 @@
 //! `-(P/V) ∂V/∂x ∂V/∂xᵀ` of `∂(P ∂V/∂x)/∂x` (the indefinite `P ∂²V/∂x²` part is left out);
 //! D is the spring damping `K_d u uᵀ`. Pinned vertices are filtered out of the system.
 
-use glam::Vec3;
+use glam::{Mat3, Vec3};
 
 use super::forces::{Model, all_forces};
 use super::gas::Gas;
@@ -27,7 +27,12 @@ pub(crate) struct ImplicitScratch {
     z: Vec<Vec3>,
     p: Vec<Vec3>,
     ap: Vec<Vec3>,
-    diag: Vec<Vec3>,
+    /// The block-Jacobi preconditioner: each vertex's 3x3 diagonal block of the system matrix,
+    /// inverted in place once assembled.
+    diag: Vec<Mat3>,
+    /// Per vertex, the sum of the magnitudes of the forces acting on it (springs, gas, gravity):
+    /// the scale that the residual of the solve is measured against.
+    magnitude: Vec<f32>,
     /// Per fragment `h² P/V` (gas rank-one term) and a per-fragment dot product buffer.
     gas_coef: Vec<f64>,
     gas_dot: Vec<f64>,
@@ -47,17 +52,21 @@ impl ImplicitScratch {
             + self.z.capacity()
             + self.p.capacity()
             + self.ap.capacity()
-            + self.diag.capacity()
             + self.previous_dv.capacity())
             * 12
             + self.contact.capacity() * std::mem::size_of::<Option<Vec3>>()
             + self.blocks.capacity() * 20
             + (self.gas_coef.capacity() + self.gas_dot.capacity()) * 8
+            + self.magnitude.capacity() * 4
+            + self.diag.capacity() * std::mem::size_of::<Mat3>()
     }
 }
 
-/// Relative residual at which conjugate gradients stop.
-const CG_TOLERANCE: f32 = 1e-4;
+/// Relative residual at which conjugate gradients stop: against the larger of the right side and
+/// the size of the forces themselves (`h Σ|f|` per vertex). Near equilibrium the net force is a
+/// small difference of large spring and gas forces, so a test relative to the right side alone
+/// asks for more digits than the f32 forces have and runs to the iteration cap every step.
+const CG_TOLERANCE: f32 = 1e-5;
 
 /// Vertices per parallel chunk (fixed, so the result does not depend on the thread count).
 const CHUNK: usize = 2048;
@@ -110,6 +119,24 @@ fn apply(
     }
 }
 
+/// `a bᵀ`.
+fn outer(a: Vec3, b: Vec3) -> Mat3 {
+    Mat3::from_cols(a * b.x, a * b.y, a * b.z)
+}
+
+/// Inverse of a symmetric positive definite block; its diagonal inverse when the block is
+/// (numerically) singular, or zero for an empty row.
+fn invert_block(m: Mat3) -> Mat3 {
+    let det = m.determinant();
+    let scale = m.x_axis.x.abs() + m.y_axis.y.abs() + m.z_axis.z.abs();
+    if det.is_finite() && det > 1e-12 * scale * scale * scale {
+        m.inverse()
+    } else {
+        let d = Vec3::new(m.x_axis.x, m.y_axis.y, m.z_axis.z);
+        Mat3::from_diagonal(Vec3::ONE / d.max(Vec3::splat(f32::MIN_POSITIVE)))
+    }
+}
+
 fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
     a.iter().zip(b).map(|(a, b)| a.dot(*b) as f64).sum()
 }
@@ -128,9 +155,11 @@ pub(crate) fn substep(
     s: &mut ImplicitScratch,
 ) -> (f64, usize) {
     let n = x.len();
-    for buffer in [&mut s.force, &mut s.rhs, &mut s.dv, &mut s.r, &mut s.z, &mut s.p, &mut s.ap, &mut s.diag] {
+    for buffer in [&mut s.force, &mut s.rhs, &mut s.dv, &mut s.r, &mut s.z, &mut s.p, &mut s.ap] {
         buffer.resize(n, Vec3::ZERO);
     }
+    s.magnitude.resize(n, 0.0);
+    s.diag.resize(n, Mat3::ZERO);
     if gas.is_some() {
         s.gradient.resize(n, Vec3::ZERO);
     }
@@ -142,11 +171,15 @@ pub(crate) fn substep(
     s.blocks.clear();
     for (i, rhs) in s.rhs.iter_mut().enumerate() {
         *rhs = s.force[i] * h;
-        s.diag[i] = Vec3::splat(model.mass[i]);
+        s.diag[i] = Mat3::from_diagonal(Vec3::splat(model.mass[i]));
+        s.magnitude[i] = model.mass[i] * model.settings.gravity.length();
     }
     for (&[i, j], &rest) in model.springs.ends.iter().zip(&model.springs.rest) {
         let (i, j) = (i as usize, j as usize);
         let (a, b, u) = spring_block(x[i], x[j], rest, ks);
+        let tension = (ks * ((x[j] - x[i]).length() - rest)).abs();
+        s.magnitude[i] += tension;
+        s.magnitude[j] += tension;
         // h² K v at i: h² B (v_j - v_i)
         let dvel = v[j] - v[i];
         let kv = (dvel * a + u * (b * u.dot(dvel))) * h2;
@@ -154,7 +187,7 @@ pub(crate) fn substep(
         s.rhs[j] -= kv;
         let (alpha, beta) = (h2 * a, h2 * b + h * kd);
         s.blocks.push((alpha, beta, u));
-        let d = Vec3::splat(alpha) + u * u * beta;
+        let d = Mat3::from_diagonal(Vec3::splat(alpha)) + outer(u * beta, u);
         s.diag[i] += d;
         s.diag[j] += d;
     }
@@ -171,7 +204,8 @@ pub(crate) fn substep(
             let f = gas.vertex_fragment[i];
             if f != u32::MAX {
                 s.gas_dot[f as usize] += g.dot(v[i]) as f64;
-                s.diag[i] += *g * *g * s.gas_coef[f as usize] as f32;
+                s.magnitude[i] += g.length() * gas.pressure[f as usize].max(0.0) as f32;
+                s.diag[i] += outer(*g * s.gas_coef[f as usize] as f32, *g);
             }
         }
         for (i, g) in s.gradient.iter().enumerate() {
@@ -234,9 +268,11 @@ pub(crate) fn substep(
     apply(model, pool, gas.as_deref(), s, &s.dv, &mut ap, &mut gas_dot);
     s.ap = ap;
     s.gas_dot = gas_dot;
-    // The Jacobi preconditioner, inverted once (stored in `diag`).
+    // The block-Jacobi preconditioner, inverted once (stored in `diag`). Per vertex the springs
+    // are stiff along the surface and soft across it, which a diagonal (per axis) preconditioner
+    // cannot tell apart on a curved surface; the 3x3 block can.
     for d in s.diag.iter_mut() {
-        *d = Vec3::ONE / d.max(Vec3::splat(f32::MIN_POSITIVE));
+        *d = invert_block(*d);
     }
     for i in 0..n {
         s.r[i] = s.rhs[i] - s.ap[i];
@@ -246,7 +282,7 @@ pub(crate) fn substep(
     }
     let mut rz = 0.0f64;
     for i in 0..n {
-        let mut z = s.r[i] * s.diag[i];
+        let mut z = s.diag[i] * s.r[i];
         if let Some(Some(normal)) = s.contact.get(i) {
             z -= *normal * z.dot(*normal);
         }
@@ -254,7 +290,8 @@ pub(crate) fn substep(
         rz += s.r[i].dot(s.z[i]) as f64;
     }
     s.p.copy_from_slice(&s.z);
-    let r0 = dot(&s.rhs, &s.rhs).sqrt();
+    let force_scale = h as f64 * s.magnitude.iter().map(|&m| (m as f64) * (m as f64)).sum::<f64>().sqrt();
+    let r0 = dot(&s.rhs, &s.rhs).sqrt().max(force_scale);
     let mut gas_dot = std::mem::take(&mut s.gas_dot);
     let mut iterations = 0;
     if r0 > 0.0 {
@@ -277,7 +314,7 @@ pub(crate) fn substep(
             for i in 0..n {
                 s.dv[i] += s.p[i] * alpha;
                 s.r[i] -= s.ap[i] * alpha;
-                let mut z = s.r[i] * s.diag[i];
+                let mut z = s.diag[i] * s.r[i];
                 if let Some(Some(normal)) = s.contact.get(i) {
                     z -= *normal * z.dot(*normal);
                 }
