@@ -15,6 +15,7 @@ use super::constraints::{Anisotropics, Bendings, Edges, Membranes, Region};
 use super::exec::{REDUCE_CHUNK, Shared, chunk_partials, for_range};
 use super::project::membrane_energy_at;
 use super::settings::{AnisotropySettings, BendingKind, ShellSettings, SolverKind};
+use crate::collision::{ContactCounts, SelfContact};
 use crate::error::{Error, ErrorKind, Result};
 use crate::material::{Lame, Material};
 use crate::mesh::{CurvatureKind, Topology, TriMesh, bounding_box, require_closed_oriented_solid, vertex_curvature};
@@ -62,15 +63,14 @@ pub(crate) const STALL_STEPS: u32 = 60;
 /// no contraction moves a surface that far, only a blow-up does.
 const DIVERGED_DIAGONALS: f32 = 2.0;
 
-/// What the collision stage did in one substep (SPEC 1.6 report).
-#[derive(Clone, Copy, Debug, Default)]
-struct CollisionCounts {
-    /// Pairs left after the broad phase.
-    candidates: u64,
-    /// Exact continuous tests run.
-    ccd_tests: u64,
-    /// Contacts projected.
-    contacts: u64,
+/// What the collision stage did in the last step, in more detail than [`ShellStats`] (for
+/// benchmarks): the counts summed over the substeps and the stage's wall time.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CollisionReport {
+    /// Candidates, filter survivors, exact tests, contacts, fail-safe reverts, rebuilds.
+    pub counts: ContactCounts,
+    /// Wall time of the collision stage in the step, s.
+    pub seconds: f64,
 }
 
 /// Per-step constants of the projections.
@@ -126,6 +126,9 @@ pub(super) struct State {
     /// Consecutive steps whose volume ratio changed by less than STALL_TOLERANCE.
     pub(super) quiet_steps: u32,
     pub(super) stats: ShellStats,
+    /// Self-contact (SPEC 1.6): BVHs and contact scratch, only when collisions are on.
+    pub(super) contact: Option<SelfContact>,
+    pub(super) collision_report: CollisionReport,
 }
 
 impl Shell {
@@ -166,6 +169,8 @@ impl Shell {
             (topology.edges.iter().map(|&[a, b]| (rest[b as usize] - rest[a as usize]).length() as f64).sum::<f64>()
                 / topology.edges.len().max(1) as f64) as f32;
         let stats = ShellStats { volume: rest_volume, volume_ratio: 1.0, ..Default::default() };
+        // SPEC 5: no BVH when collisions are off.
+        let contact = settings.collisions.then(|| SelfContact::new(&rest, &topology.edges, &triangles));
         let state = State {
             vertex_face_offsets: topology.vertex_face_offsets.clone(),
             vertex_faces: topology.vertex_faces.clone(),
@@ -189,6 +194,8 @@ impl Shell {
             mean_edge,
             quiet_steps: 0,
             stats,
+            contact,
+            collision_report: CollisionReport::default(),
             rest,
             triangles,
         };
@@ -277,6 +284,12 @@ impl Shell {
             + s.anisotropics.as_ref().map_or(0, |a| a.memory_bytes())
             + b(&s.lambda_aniso)
             + b(&s.partials)
+            + s.contact.as_ref().map_or(0, |c| c.memory_bytes())
+    }
+
+    /// The collision stage's detailed counts and time in the last step (zero without collisions).
+    pub fn collision_report(&self) -> CollisionReport {
+        self.state.collision_report
     }
 
     /// Bytes of anisotropic storage (0 until a region is added).
@@ -370,7 +383,7 @@ impl State {
         self.v_backup.copy_from_slice(&self.v);
         let h = settings.time_step / settings.substeps as f32;
         let coeff = coefficients(settings, h);
-        let (mut candidates, mut tests, mut contacts) = (0u64, 0u64, 0u64);
+        let mut report = CollisionReport::default();
         for substep in 0..settings.substeps {
             self.predict(settings.pressure, h, parallel);
             self.lambda_membrane.fill(0.0);
@@ -392,13 +405,16 @@ impl State {
             }
             // SPEC 1.1 step 3: collisions over x_t -> p, between the constraint sweeps and the
             // velocity update.
-            if settings.collisions {
-                let counts = self.resolve_collisions(settings);
-                candidates += counts.candidates;
-                tests += counts.ccd_tests;
-                contacts += counts.contacts;
+            if self.contact.is_some() {
+                let start = Instant::now();
+                let counts = self.resolve_collisions(settings, h);
+                report.counts.add(&counts);
+                report.seconds += start.elapsed().as_secs_f64();
             }
             self.update_velocities(settings, h, parallel)?;
+            if let Some(contact) = &self.contact {
+                contact.limit_velocities(&mut self.v, &self.inv_mass);
+            }
             if measure && substep + 1 == settings.substeps {
                 self.measure(settings, &coeff, parallel);
             }
@@ -409,18 +425,20 @@ impl State {
         }
         self.stats.volume = volume;
         self.stats.volume_ratio = volume / self.rest_volume;
-        self.stats.collision_candidates = candidates;
-        self.stats.ccd_tests = tests;
-        self.stats.contacts = contacts;
+        self.stats.collision_candidates = report.counts.candidates;
+        self.stats.ccd_tests = report.counts.ccd_tests;
+        self.stats.contacts = report.counts.contacts;
+        self.collision_report = report;
         Ok(())
     }
 
     /// SPEC 1.6, the collision stage: finds the vertex-face and edge-edge pairs that come closer
-    /// than the collision thickness over x -> p and projects them apart, on `p`. The collision
-    /// module (issue 4) fills it; until then it finds nothing, allocates nothing and its
-    /// counters stay 0.
-    fn resolve_collisions(&mut self, _settings: &ShellSettings) -> CollisionCounts {
-        CollisionCounts::default()
+    /// than δ = collision_thickness × bounding-box diagonal over x -> p and projects them apart,
+    /// on `p`, to the side they came from (see `collision::self_contact`).
+    fn resolve_collisions(&mut self, settings: &ShellSettings, h: f32) -> ContactCounts {
+        let Some(contact) = self.contact.as_mut() else { return ContactCounts::default() };
+        let delta = settings.collision_thickness as f64 * self.diagonal as f64;
+        contact.resolve(&self.x, &mut self.p, &self.inv_mass, delta, h)
     }
 
     /// SPEC 1.1 step 1 with the pressure force of SPEC 1.2:
