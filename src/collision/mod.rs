@@ -22,6 +22,7 @@ pub mod bvh;
 pub mod candidates;
 pub mod ccd;
 pub mod filters;
+pub mod hull_filter;
 pub mod inclusion;
 pub mod self_contact;
 

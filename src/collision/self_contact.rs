@@ -22,6 +22,7 @@ use glam::{DVec3, Vec3};
 use super::bvh::{Aabb, Bvh};
 use super::ccd::{CcdSettings, Stage, edge_edge_with, vertex_triangle_with};
 use super::filters::V3;
+use super::hull_filter::{edge_edge_hulls_separated, vertex_triangle_hulls_separated};
 
 /// Projection rounds (projection, then re-check of the moved pairs) before the fail-safe.
 const ROUNDS: usize = 6;
@@ -36,7 +37,8 @@ const RECHECK_FRACTION: f64 = 0.5;
 pub struct ContactCounts {
     /// Candidate pairs from the BVHs (first round), pairs sharing a vertex excluded.
     pub candidates: u64,
-    /// Candidates left after the exact swept-box test of each pair.
+    /// Candidates left after the swept-hull separating-axis filter ([`super::hull_filter`]) and
+    /// the exact swept-box test of each pair.
     pub after_boxes: u64,
     /// Candidates left after the deforming non-penetration (plane) filter: exact tests run.
     pub ccd_tests: u64,
@@ -116,7 +118,7 @@ fn fill_boxes<const N: usize>(x0: &[Vec3], x1: &[Vec3], prims: &[[u32; N]], half
 
 /// Closest point of `p` on triangle `abc`: barycentric weights (α_a, α_b, α_c) (Ericson,
 /// "Real-Time Collision Detection" 5.1.5).
-fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
+pub(crate) fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
     let (ab, ac, ap) = (b - a, c - a, p - a);
     let (d1, d2) = (ab.dot(ap), ac.dot(ap));
     if d1 <= 0.0 && d2 <= 0.0 {
@@ -156,7 +158,7 @@ fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
 }
 
 /// Parameters (s, t) of the closest points of segments p1q1 and p2q2 (Ericson 5.1.9).
-fn closest_segments(p1: DVec3, q1: DVec3, p2: DVec3, q2: DVec3) -> (f64, f64) {
+pub(crate) fn closest_segments(p1: DVec3, q1: DVec3, p2: DVec3, q2: DVec3) -> (f64, f64) {
     let (d1, d2, r) = (q1 - p1, q2 - p2, p1 - p2);
     let (a, e, f) = (d1.length_squared(), d2.length_squared(), d2.dot(r));
     let tiny = 1e-300;
@@ -267,10 +269,11 @@ impl SelfContact {
         let (tris, edges, flags, settings) = (&self.triangles, &self.edges, &self.flags, &self.settings);
         let hits = &mut self.hits;
         let first = !only_moved;
-        let mut tally = |stage: Stage| {
+        // Stage None: refuted by the hull filter.
+        let mut tally = |stage: Option<Stage>| {
             if first {
                 counts.candidates += 1;
-                if stage != Stage::SweptAabb {
+                if let Some(stage) = stage.filter(|&s| s != Stage::SweptAabb) {
                     counts.after_boxes += 1;
                     if stage != Stage::PlaneFilter {
                         counts.ccd_tests += 1;
@@ -292,8 +295,12 @@ impl SelfContact {
             }
             let start = [d(x0[v as usize]), d(x0[t[0] as usize]), d(x0[t[1] as usize]), d(x0[t[2] as usize])];
             let end = [d(x1[v as usize]), d(x1[t[0] as usize]), d(x1[t[1] as usize]), d(x1[t[2] as usize])];
+            if vertex_triangle_hulls_separated(&start, &end, thickness) {
+                tally(None);
+                return;
+            }
             let out = vertex_triangle_with(&start, &end, thickness, settings);
-            tally(out.stage);
+            tally(Some(out.stage));
             if let Some(toi) = out.toi {
                 hits.push((0, v, f, toi));
             }
@@ -305,8 +312,12 @@ impl SelfContact {
             }
             let start = [d(x0[a as usize]), d(x0[b as usize]), d(x0[c as usize]), d(x0[e as usize])];
             let end = [d(x1[a as usize]), d(x1[b as usize]), d(x1[c as usize]), d(x1[e as usize])];
+            if edge_edge_hulls_separated(&start, &end, thickness) {
+                tally(None);
+                return;
+            }
             let out = edge_edge_with(&start, &end, thickness, settings);
-            tally(out.stage);
+            tally(Some(out.stage));
             if let Some(toi) = out.toi {
                 hits.push((1, i, j, toi));
             }
@@ -397,36 +408,50 @@ impl SelfContact {
             counts.contacts += (self.contacts.len() - first_new) as u64;
             self.flags.fill(0);
             self.project(p, inv_mass, thickness as f32);
+            // Re-check every pair found (its constraint may hold at the end of the step while its
+            // path still crosses) besides every pair the projection moved.
+            for k in 0..self.hits.len() {
+                for v in self.hit_vertices(k) {
+                    self.flags[v as usize] |= MOVED;
+                }
+            }
         }
         // Fail-safe: contacts remain after the projection rounds. Put the vertices of every pair
         // that may still intersect (thickness 0) back to the start, until none does.
+        // Pairs whose trajectories did not change since they were last found clear (at a larger
+        // thickness) stay clear: only pairs with a vertex moved by the last projection, then with
+        // a vertex newly put back, are tested.
         loop {
             counts.rounds += 1;
             counts.rebuilds += self.refit(x0, p, 0.0);
+            self.detect(x0, p, 0.0, true, &mut ContactCounts::default());
             for f in &mut self.flags {
                 *f &= REVERTED;
             }
-            self.detect(x0, p, 0.0, false, &mut ContactCounts::default());
             if self.hits.is_empty() {
                 return counts;
             }
             for k in 0..self.hits.len() {
-                let (kind, i, j, _) = self.hits[k];
-                let idx = if kind == 0 {
-                    let t = self.triangles[j as usize];
-                    [i, t[0], t[1], t[2]]
-                } else {
-                    let ([a, b], [c, e]) = (self.edges[i as usize], self.edges[j as usize]);
-                    [a, b, c, e]
-                };
-                for v in idx {
+                for v in self.hit_vertices(k) {
                     if self.flags[v as usize] & REVERTED == 0 {
-                        self.flags[v as usize] |= REVERTED;
+                        self.flags[v as usize] |= REVERTED | MOVED;
                         p[v as usize] = x0[v as usize];
                         counts.reverted += 1;
                     }
                 }
             }
+        }
+    }
+
+    /// The four vertices of hit `k`.
+    fn hit_vertices(&self, k: usize) -> [u32; 4] {
+        let (kind, i, j, _) = self.hits[k];
+        if kind == 0 {
+            let t = self.triangles[j as usize];
+            [i, t[0], t[1], t[2]]
+        } else {
+            let ([a, b], [c, e]) = (self.edges[i as usize], self.edges[j as usize]);
+            [a, b, c, e]
         }
     }
 
