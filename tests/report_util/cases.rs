@@ -58,10 +58,9 @@ const BOUND: f32 = 100.0;
 pub const KNOWN_BODY_BUGS: &[(&str, &str)] =
     &[("", "explicit Euler"), ("", "symplectic Euler"), ("most springs breaking", "implicit Euler")];
 
-/// Shell cases that break the contract today: an anisotropic region with the default push turns
-/// the shell inside out (V/V0 < 0) while every step returns OK (ignored reproducer
-/// `shell_inversion_is_reported_unstable` in tests/stability.rs).
-pub const KNOWN_SHELL_BUGS: &[(&str, &str)] = &[("anisotropic region", "XPBD"), ("anisotropic region", "PBD")];
+/// Shell cases that break the contract today: none (an inverted shell is rolled back and
+/// reported UNSTABLE, see `shell_inversion_is_reported_unstable` in tests/stability.rs).
+pub const KNOWN_SHELL_BUGS: &[(&str, &str)] = &[];
 
 pub fn is_known_bug(row: &Row) -> bool {
     let list: &[(&str, &str)] = match row.simulator {
