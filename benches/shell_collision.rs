@@ -138,5 +138,7 @@ fn table(title: &str, pressure_factor: f32, steps: usize) {
 fn main() {
     let steps = std::env::var("SHELL_COLLISION_STEPS").ok().and_then(|s| s.parse().ok()).unwrap_or(60);
     table("Default settings (pressure 0.7 Pa, 1 thread)", 1.0, steps);
-    table("Squeezed: pressure x30", 30.0, steps);
+    if std::env::var("SHELL_COLLISION_SQUEEZE").map_or(true, |v| v != "0") {
+        table("Squeezed: pressure x30", 30.0, steps);
+    }
 }
