@@ -288,42 +288,63 @@ impl SelfContact {
             }
             !only_moved || f.iter().any(|&x| x & MOVED != 0)
         };
-        self.vertex_tree.for_each_overlap(&self.face_tree, |v, f| {
-            let t = tris[f as usize];
-            if t.contains(&v) || !wanted([v, t[0], t[1], t[2]]) {
-                return;
+        // One pair: kind 0 = (vertex, face), 1 = (edge, edge).
+        let mut test = |kind: u8, i: u32, j: u32| {
+            if kind == 0 {
+                let (v, f) = (i, j);
+                let t = tris[f as usize];
+                if t.contains(&v) || !wanted([v, t[0], t[1], t[2]]) {
+                    return;
+                }
+                let start = [d(x0[v as usize]), d(x0[t[0] as usize]), d(x0[t[1] as usize]), d(x0[t[2] as usize])];
+                let end = [d(x1[v as usize]), d(x1[t[0] as usize]), d(x1[t[1] as usize]), d(x1[t[2] as usize])];
+                if vertex_triangle_hulls_separated(&start, &end, thickness) {
+                    tally(None);
+                    return;
+                }
+                let out = vertex_triangle_with(&start, &end, thickness, settings);
+                tally(Some(out.stage));
+                if let Some(toi) = out.toi {
+                    hits.push((0, v, f, toi));
+                }
+            } else {
+                let (i, j) = (i.min(j), i.max(j));
+                let ([a, b], [c, e]) = (edges[i as usize], edges[j as usize]);
+                if a == c || a == e || b == c || b == e || !wanted([a, b, c, e]) {
+                    return;
+                }
+                let start = [d(x0[a as usize]), d(x0[b as usize]), d(x0[c as usize]), d(x0[e as usize])];
+                let end = [d(x1[a as usize]), d(x1[b as usize]), d(x1[c as usize]), d(x1[e as usize])];
+                if edge_edge_hulls_separated(&start, &end, thickness) {
+                    tally(None);
+                    return;
+                }
+                let out = edge_edge_with(&start, &end, thickness, settings);
+                tally(Some(out.stage));
+                if let Some(toi) = out.toi {
+                    hits.push((1, i, j, toi));
+                }
             }
-            let start = [d(x0[v as usize]), d(x0[t[0] as usize]), d(x0[t[1] as usize]), d(x0[t[2] as usize])];
-            let end = [d(x1[v as usize]), d(x1[t[0] as usize]), d(x1[t[1] as usize]), d(x1[t[2] as usize])];
-            if vertex_triangle_hulls_separated(&start, &end, thickness) {
-                tally(None);
-                return;
-            }
-            let out = vertex_triangle_with(&start, &end, thickness, settings);
-            tally(Some(out.stage));
-            if let Some(toi) = out.toi {
-                hits.push((0, v, f, toi));
-            }
-        });
-        self.edge_tree.for_each_self_overlap(|i, j| {
-            let ([a, b], [c, e]) = (edges[i as usize], edges[j as usize]);
-            if a == c || a == e || b == c || b == e || !wanted([a, b, c, e]) {
-                return;
-            }
-            let start = [d(x0[a as usize]), d(x0[b as usize]), d(x0[c as usize]), d(x0[e as usize])];
-            let end = [d(x1[a as usize]), d(x1[b as usize]), d(x1[c as usize]), d(x1[e as usize])];
-            if edge_edge_hulls_separated(&start, &end, thickness) {
-                tally(None);
-                return;
-            }
-            let out = edge_edge_with(&start, &end, thickness, settings);
-            tally(Some(out.stage));
-            if let Some(toi) = out.toi {
-                hits.push((1, i, j, toi));
-            }
-        });
+        };
+        if !only_moved {
+            self.vertex_tree.for_each_overlap(&self.face_tree, |v, f| test(0, v, f));
+            self.edge_tree.for_each_self_overlap(|i, j| test(1, i, j));
+        } else {
+            // Only primitives with a moved vertex: small trees over them, queried against the
+            // full ones (a pair of two moved primitives may come twice: deduplicated below).
+            let moved = |v: u32| flags[v as usize] & MOVED != 0;
+            let mv: Vec<u32> = (0..flags.len() as u32).filter(|&v| moved(v)).collect();
+            let mf: Vec<u32> = (0..tris.len() as u32).filter(|&f| tris[f as usize].iter().any(|&v| moved(v))).collect();
+            let me: Vec<u32> =
+                (0..edges.len() as u32).filter(|&e| edges[e as usize].iter().any(|&v| moved(v))).collect();
+            let subset = |ids: &[u32], boxes: &[Aabb]| Bvh::build(ids.iter().map(|&i| boxes[i as usize]).collect());
+            subset(&mv, &self.vertex_boxes).for_each_overlap(&self.face_tree, |k, f| test(0, mv[k as usize], f));
+            self.vertex_tree.for_each_overlap(&subset(&mf, &self.face_boxes), |v, k| test(0, v, mf[k as usize]));
+            subset(&me, &self.edge_boxes).for_each_overlap(&self.edge_tree, |k, j| test(1, me[k as usize], j));
+        }
         // The traversal order is fixed, but sort anyway so the projection order is the pairs'.
         self.hits.sort_unstable_by(|x, y| (x.0, x.1, x.2).cmp(&(y.0, y.1, y.2)));
+        self.hits.dedup_by(|x, y| (x.0, x.1, x.2) == (y.0, y.1, y.2));
     }
 
     /// A contact constraint for hit `k` of `self.hits`: weights and barycentrics at the time of
