@@ -461,8 +461,12 @@ typedef struct SoftshellShellDef {
   // The shell is finished (later steps do nothing) when V/V0 falls below this, in [0, 1);
   // 0 = never. Default 0.3.
   float stop_volume_ratio;
-  // Self-collision (continuous collision detection). Default true. The collision stage is not
-  // implemented yet: it currently does nothing and its stats stay 0.
+  // Self-collision (continuous collision detection). Default true. Each substep finds the
+  // vertex-face and edge-edge pairs that come within `collision_thickness` over the substep
+  // (swept-box BVH, non-penetration filters, exact conservative CCD in double precision) and
+  // pushes them apart to the side they came from, so a shell that starts free of
+  // self-intersections stays so. When false, no collision data is built (see
+  // `softshell_shell_memory_bytes`) and the collision stats stay 0.
   bool collisions;
   // Collision thickness delta relative to the bounding-box diagonal, in [0, 1]. Default 1e-4.
   float collision_thickness;
@@ -519,11 +523,14 @@ typedef struct SoftshellShellStats {
   double bending_energy;
   // Anisotropic fibre energy, J (`mu t A0 psi` summed over region faces).
   double anisotropic_energy;
-  // Collision candidate pairs after the broad phase (0 while collisions are not implemented).
+  // Vertex-face and edge-edge pairs sharing no vertex whose swept boxes overlap (the BVH's
+  // candidates), summed over the substeps; 0 with collisions off.
   uint64_t collision_candidates;
-  // Exact continuous collision tests run (0 while collisions are not implemented).
+  // Exact continuous collision tests run: the candidates left after the swept-box and
+  // non-penetration filters, summed over the substeps; 0 with collisions off.
   uint64_t ccd_tests;
-  // Contacts resolved (0 while collisions are not implemented).
+  // Contact constraints projected in the step (pairs found within the collision thickness),
+  // summed over the substeps; 0 with collisions off.
   uint64_t contacts;
   // Wall time of the step, s.
   double step_seconds;

@@ -205,7 +205,8 @@ fn defaults_contract_a_unit_mesh_below_0_8_within_200_steps_monotonically() {
         assert!((s.time - n as f64 / 60.0).abs() < 1e-5);
         assert!(s.volume_ratio.is_finite() && s.residual.is_finite());
         assert!(s.elastic_energy >= 0.0 && s.bending_energy >= 0.0 && s.anisotropic_energy == 0.0);
-        assert_eq!((s.collision_candidates, s.ccd_tests, s.contacts), (0, 0, 0));
+        // A contracting sphere never touches itself: pairs may be tested, none is a contact.
+        assert!(s.ccd_tests <= s.collision_candidates && s.contacts == 0, "{s:?}");
         assert!(s.step_seconds > 0.0);
         assert!(!s.stalled);
         if s.volume_ratio < 0.8 {

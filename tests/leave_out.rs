@@ -2,8 +2,7 @@
 //! a scene without a feature holds no memory for it (`softshell_*_memory_bytes` compared with and
 //! without the feature) and does no work for it (a stats counter or field that stays 0).
 //!
-//! Gaps (see report/error_vs_time.md): the shell's collision stage does not exist yet, so "no BVH
-//! without collisions" holds trivially (memory is equal with collisions on and off); the lattice
+//! Gaps (see report/error_vs_time.md): the lattice
 //! stats have no per-stage counter, so for the lattice only memory is shown.
 #![cfg(all(feature = "shell", feature = "body", feature = "lattice"))]
 
@@ -52,12 +51,18 @@ fn shell_without_bending_anisotropy_multipliers_or_pool_holds_none() {
     let two = Shell::new(&p, &t, &SoftshellShellDef { threads: 2, ..shell_def() }).unwrap();
     assert!(two.memory() > plain, "a 2-thread shell holds its pool: {} vs {plain}", two.memory());
 
-    // Collisions off: no collision data and no collision work. (The collision stage is not
-    // implemented yet, so both hold today whatever the setting: equal memory, zero counters.)
+    // Collisions off: no BVH (at least one 48-byte box per vertex, edge and face) and no
+    // collision work.
     let off = Shell::new(&p, &t, &SoftshellShellDef { collisions: false, ..shell_def() }).unwrap();
-    assert!(off.memory() <= plain);
+    let (vertices, faces) = (p.len() / 3, t.len() / 3);
+    let boxes = 48 * (vertices + faces * 3 / 2 + faces);
+    assert!(off.memory() + boxes <= plain, "collisions off {} vs on {plain}", off.memory());
     let s = off.step().unwrap();
     assert_eq!((s.collision_candidates, s.ccd_tests, s.contacts), (0, 0, 0));
+    // With collisions the stage runs: candidate pairs are found (neighbouring primitives).
+    let on = Shell::new(&p, &t, &shell_def()).unwrap();
+    let s = on.step().unwrap();
+    assert!(s.collision_candidates > 0 && s.ccd_tests <= s.collision_candidates, "{s:?}");
     println!(
         "shell memory: default {plain}, no bending {}, PBD {}, 2 threads {}, with region {}, collisions off {}",
         none.memory(),

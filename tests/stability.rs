@@ -104,9 +104,9 @@ fn body_blow_up_is_reported_unstable() {
     }
 }
 
-/// Reproducer of a simulator bug (see report/error_vs_time.md): an anisotropic region with the
-/// default settings on data/eight.obj turns the shell inside out (V/V0 < 0) while every step
-/// returns OK. Un-ignore once the shell reports it (UNSTABLE with rollback) or prevents it.
+/// Regression test (was a known bug, see report/error_vs_time.md): an anisotropic region with the
+/// default settings on data/eight.obj, collisions off, used to turn the shell inside out (V/V0 < 0)
+/// while every step returned OK. Now the step is rolled back and reported UNSTABLE.
 #[test]
 fn shell_inversion_is_reported_unstable() {
     use report_util::*;
@@ -131,12 +131,11 @@ fn shell_inversion_is_reported_unstable() {
     }
 }
 
-/// Reproducer of a simulator bug (see report/error_vs_time.md): with 128 substeps of h = 1/60 s
-/// the default contraction does not move at all (the first displacement h^2 w f is below half an
-/// f32 ulp and the velocity is rebuilt from the rounded positions). More substeps must converge,
-/// not stall. Un-ignore once fixed.
+/// Regression test (was a known bug, see report/error_vs_time.md): with 128 substeps of
+/// h = 1/60 s the default contraction did not move at all (the first displacement h^2 w f is
+/// below half an f32 ulp and the velocity was rebuilt from the rounded positions). Positions now
+/// carry what rounding loses, so more substeps converge instead of stalling.
 #[test]
-#[ignore = "known shell bug: many substeps stall in f32"]
 fn shell_many_substeps_still_contract() {
     use report_util::*;
     let (p, t) = unit_obj("sphere.obj", 1.0);

@@ -1,7 +1,7 @@
 //! Collision detection (SPEC 1.6): exact, conservative continuous collision queries in f64.
 //!
 //! Owns the standalone vertex-triangle and edge-edge queries, the broad phase over a moving
-//! triangle mesh ([`bvh`], [`candidates`]) and, later, the contact constraints of the shell.
+//! triangle mesh ([`bvh`], [`candidates`]) and the self-contact of a moving mesh with its contact constraints ([`self_contact`]).
 //! Knows nothing of the FFI or of any simulator.
 //!
 //! A query runs three stages, cheapest first, each of which may only say "certainly no contact"
@@ -22,8 +22,11 @@ pub mod bvh;
 pub mod candidates;
 pub mod ccd;
 pub mod filters;
+pub mod hull_filter;
 pub mod inclusion;
+pub mod self_contact;
 
 pub use bvh::{Aabb, Bvh};
 pub use candidates::{Candidates, MeshBroadPhase};
 pub use ccd::{CcdOutcome, CcdSettings, Stage, edge_edge, edge_edge_with, vertex_triangle, vertex_triangle_with};
+pub use self_contact::{ContactCounts, SelfContact};

@@ -49,6 +49,29 @@ impl<T: Copy> Shared<T> {
     }
 }
 
+/// Writes `old + corr` (old = the current `p[i]`) to `p[i]` and adds what the f32 rounding lost
+/// to `lo[i]` (Fast2Sum: exact when |old| >= |corr| per component). With many substeps a
+/// correction can be smaller than half an ulp of the position; kept in `lo`, it still reaches
+/// the velocity and the position (see `State::update_velocities`).
+///
+/// # Safety
+/// No other thread may access element `i` of `p` or `lo` during this loop.
+#[inline(always)]
+pub(crate) unsafe fn add_compensated(
+    p: &Shared<glam::Vec3>,
+    lo: &Shared<glam::Vec3>,
+    i: usize,
+    old: glam::Vec3,
+    corr: glam::Vec3,
+) {
+    let new = old + corr;
+    // SAFETY: the caller's promise.
+    unsafe {
+        p.set(i, new);
+        lo.set(i, lo.get(i) + (corr - (new - old)));
+    }
+}
+
 /// Calls `f(i)` for every `i` in `start..end`, on the current rayon pool when `parallel`.
 /// The calls must be independent (they may run in any order).
 #[inline]

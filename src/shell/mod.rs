@@ -4,7 +4,7 @@
 //!
 //! Owns: the settings, the flat rest data of every constraint kind, the evolving state and the
 //! step of SPEC 1.1. Uses `mesh`, `material` and `solver`; knows nothing of the C ABI.
-//! The collision stage (SPEC 1.1 step 3) is a placeholder here: the collision module fills it.
+//! The collision stage (SPEC 1.1 step 3) runs `collision::SelfContact` when collisions are on.
 
 mod constraints;
 mod exec;
@@ -14,4 +14,4 @@ mod settings;
 mod simulator;
 
 pub use settings::{AnisotropySettings, BendingKind, ShellSettings, SolverKind};
-pub use simulator::{Shell, ShellStats};
+pub use simulator::{CollisionReport, Shell, ShellStats};

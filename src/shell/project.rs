@@ -8,7 +8,7 @@
 use glam::{Vec3, Vec4};
 
 use super::constraints::{Anisotropics, Membranes};
-use super::exec::{MIN_PARALLEL, Shared, for_range, for_range_min};
+use super::exec::{MIN_PARALLEL, Shared, add_compensated, for_range, for_range_min};
 use super::settings::{AnisotropySettings, SolverKind};
 use super::simulator::{Coefficients, State};
 use crate::material::{Mat32, Material, anisotropic_energy, membrane_energy};
@@ -59,6 +59,7 @@ impl State {
     pub(super) fn project_membranes_stvk(&mut self, c: &Coefficients, parallel: bool) {
         let m = &self.membranes;
         let p = Shared::new(&mut self.p);
+        let lo = Shared::new(&mut self.p_lo);
         let lambda = Shared::new(&mut self.lambda_membrane);
         let xpbd = c.solver == SolverKind::Xpbd;
         let alpha = Vec4::splat(c.alpha_membrane);
@@ -119,7 +120,7 @@ impl State {
                             lambda.set(lanes[j], lam[j] + dlambda[j]);
                         }
                         for k in 0..3 {
-                            p.set(idx[j][k], x[k].lane(j) + corr[k].lane(j));
+                            add_compensated(&p, &lo, idx[j][k], x[k].lane(j), corr[k].lane(j));
                         }
                     }
                 }
@@ -133,6 +134,7 @@ impl State {
         }
         let m = &self.membranes;
         let p = Shared::new(&mut self.p);
+        let lo = Shared::new(&mut self.p_lo);
         let lambda = Shared::new(&mut self.lambda_membrane);
         for colour in m.colours.windows(2) {
             for_range(parallel, colour[0], colour[1], |i| {
@@ -163,9 +165,9 @@ impl State {
                             }
                         }
                     }
-                    p.set(a, x[0] + corr[0]);
-                    p.set(b, x[1] + corr[1]);
-                    p.set(d, x[2] + corr[2]);
+                    add_compensated(&p, &lo, a, x[0], corr[0]);
+                    add_compensated(&p, &lo, b, x[1], corr[1]);
+                    add_compensated(&p, &lo, d, x[2], corr[2]);
                 }
             });
         }
@@ -175,6 +177,7 @@ impl State {
         let e = &self.edges;
         let w = &self.inv_mass;
         let p = Shared::new(&mut self.p);
+        let lo = Shared::new(&mut self.p_lo);
         for colour in e.colours.windows(2) {
             for_range(parallel, colour[0], colour[1], |i| {
                 let (a, b) = (e.idx[i][0] as usize, e.idx[i][1] as usize);
@@ -182,8 +185,8 @@ impl State {
                 unsafe {
                     let (xa, xb) = (p.get(a), p.get(b));
                     if let Some((da, db)) = distance_correction(xa, xb, w[a], w[b], e.rest[i]) {
-                        p.set(a, xa + da);
-                        p.set(b, xb + db);
+                        add_compensated(&p, &lo, a, xa, da);
+                        add_compensated(&p, &lo, b, xb, db);
                     }
                 }
             });
@@ -214,6 +217,7 @@ impl State {
     pub(super) fn project_bendings(&mut self, c: &Coefficients, parallel: bool) {
         let s = &self.bendings;
         let p = Shared::new(&mut self.p);
+        let lo = Shared::new(&mut self.p_lo);
         let lambda = Shared::new(&mut self.lambda_bending);
         let xpbd = c.solver == SolverKind::Xpbd;
         for colour in s.colours.windows(2) {
@@ -286,7 +290,7 @@ impl State {
                         }
                         let (vj, sj, wk) = (v.lane(j), scale[j], &s.wk[i]);
                         for k in 0..4 {
-                            p.set(idx[j][k], x[k].lane(j) + vj * (wk[k] * sj));
+                            add_compensated(&p, &lo, idx[j][k], x[k].lane(j), vj * (wk[k] * sj));
                         }
                     }
                 }
@@ -298,6 +302,7 @@ impl State {
         let Some(s) = &self.anisotropics else { return };
         let w = &self.inv_mass;
         let p = Shared::new(&mut self.p);
+        let lo = Shared::new(&mut self.p_lo);
         let lambda = Shared::new(&mut self.lambda_aniso);
         for colour in s.colours.windows(2) {
             for_range(parallel, colour[0], colour[1], |i| {
@@ -334,9 +339,9 @@ impl State {
                             }
                         }
                     }
-                    p.set(a, x[0] + corr[0]);
-                    p.set(b, x[1] + corr[1]);
-                    p.set(d, x[2] + corr[2]);
+                    add_compensated(&p, &lo, a, x[0], corr[0]);
+                    add_compensated(&p, &lo, b, x[1], corr[1]);
+                    add_compensated(&p, &lo, d, x[2], corr[2]);
                 }
             });
         }

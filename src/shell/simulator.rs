@@ -15,6 +15,7 @@ use super::constraints::{Anisotropics, Bendings, Edges, Membranes, Region};
 use super::exec::{REDUCE_CHUNK, Shared, chunk_partials, for_range};
 use super::project::membrane_energy_at;
 use super::settings::{AnisotropySettings, BendingKind, ShellSettings, SolverKind};
+use crate::collision::{ContactCounts, SelfContact};
 use crate::error::{Error, ErrorKind, Result};
 use crate::material::{Lame, Material};
 use crate::mesh::{CurvatureKind, Topology, TriMesh, bounding_box, require_closed_oriented_solid, vertex_curvature};
@@ -62,15 +63,18 @@ pub(crate) const STALL_STEPS: u32 = 60;
 /// no contraction moves a surface that far, only a blow-up does.
 const DIVERGED_DIAGONALS: f32 = 2.0;
 
-/// What the collision stage did in one substep (SPEC 1.6 report).
-#[derive(Clone, Copy, Debug, Default)]
-struct CollisionCounts {
-    /// Pairs left after the broad phase.
-    candidates: u64,
-    /// Exact continuous tests run.
-    ccd_tests: u64,
-    /// Contacts projected.
-    contacts: u64,
+/// A step in which more than 1/this of the triangles' normals turn by more than 90 degrees is
+/// taken as an inversion (a surface folding through itself), not as motion.
+const INVERTED_FRACTION_DENOMINATOR: usize = 4;
+
+/// What the collision stage did in the last step, in more detail than [`ShellStats`] (for
+/// benchmarks): the counts summed over the substeps and the stage's wall time.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CollisionReport {
+    /// Candidates, filter survivors, exact tests, contacts, fail-safe reverts, rebuilds.
+    pub counts: ContactCounts,
+    /// Wall time of the collision stage in the step, s.
+    pub seconds: f64,
 }
 
 /// Per-step constants of the projections.
@@ -105,6 +109,12 @@ pub(super) struct State {
     pub(super) x: Vec<Vec3>,
     pub(super) v: Vec<Vec3>,
     pub(super) p: Vec<Vec3>,
+    /// What f32 rounding lost from x (the position is x + x_lo): with many substeps the
+    /// displacement of one substep can be below half an ulp of x.
+    pub(super) x_lo: Vec<Vec3>,
+    /// The same for p during a substep (written by the projections, see `add_compensated`).
+    pub(super) p_lo: Vec<Vec3>,
+    pub(super) x_lo_backup: Vec<Vec3>,
     pub(super) inv_mass: Vec<f32>,
     pub(super) x_backup: Vec<Vec3>,
     pub(super) v_backup: Vec<Vec3>,
@@ -126,6 +136,9 @@ pub(super) struct State {
     /// Consecutive steps whose volume ratio changed by less than STALL_TOLERANCE.
     pub(super) quiet_steps: u32,
     pub(super) stats: ShellStats,
+    /// Self-contact (SPEC 1.6): BVHs and contact scratch, only when collisions are on.
+    pub(super) contact: Option<SelfContact>,
+    pub(super) collision_report: CollisionReport,
 }
 
 impl Shell {
@@ -166,12 +179,17 @@ impl Shell {
             (topology.edges.iter().map(|&[a, b]| (rest[b as usize] - rest[a as usize]).length() as f64).sum::<f64>()
                 / topology.edges.len().max(1) as f64) as f32;
         let stats = ShellStats { volume: rest_volume, volume_ratio: 1.0, ..Default::default() };
+        // SPEC 5: no BVH when collisions are off.
+        let contact = settings.collisions.then(|| SelfContact::new(&rest, &topology.edges, &triangles));
         let state = State {
             vertex_face_offsets: topology.vertex_face_offsets.clone(),
             vertex_faces: topology.vertex_faces.clone(),
             x: rest.clone(),
             v: vec![Vec3::ZERO; n],
             p: rest.clone(),
+            x_lo: vec![Vec3::ZERO; n],
+            p_lo: vec![Vec3::ZERO; n],
+            x_lo_backup: vec![Vec3::ZERO; n],
             x_backup: vec![Vec3::ZERO; n],
             v_backup: vec![Vec3::ZERO; n],
             inv_mass,
@@ -189,6 +207,8 @@ impl Shell {
             mean_edge,
             quiet_steps: 0,
             stats,
+            contact,
+            collision_report: CollisionReport::default(),
             rest,
             triangles,
         };
@@ -264,6 +284,9 @@ impl Shell {
             + b(&s.x)
             + b(&s.v)
             + b(&s.p)
+            + b(&s.x_lo)
+            + b(&s.p_lo)
+            + b(&s.x_lo_backup)
             + b(&s.inv_mass)
             + b(&s.x_backup)
             + b(&s.v_backup)
@@ -277,6 +300,12 @@ impl Shell {
             + s.anisotropics.as_ref().map_or(0, |a| a.memory_bytes())
             + b(&s.lambda_aniso)
             + b(&s.partials)
+            + s.contact.as_ref().map_or(0, |c| c.memory_bytes())
+    }
+
+    /// The collision stage's detailed counts and time in the last step (zero without collisions).
+    pub fn collision_report(&self) -> CollisionReport {
+        self.state.collision_report
     }
 
     /// Bytes of anisotropic storage (0 until a region is added).
@@ -319,6 +348,7 @@ impl Shell {
                 s.x.copy_from_slice(&s.x_backup);
                 s.v.copy_from_slice(&s.v_backup);
                 s.p.copy_from_slice(&s.x_backup);
+                s.x_lo.copy_from_slice(&s.x_lo_backup);
                 s.stats = previous_stats;
                 Err(error)
             }
@@ -368,9 +398,10 @@ impl State {
     fn advance(&mut self, settings: &ShellSettings, parallel: bool, measure: bool) -> Result<()> {
         self.x_backup.copy_from_slice(&self.x);
         self.v_backup.copy_from_slice(&self.v);
+        self.x_lo_backup.copy_from_slice(&self.x_lo);
         let h = settings.time_step / settings.substeps as f32;
         let coeff = coefficients(settings, h);
-        let (mut candidates, mut tests, mut contacts) = (0u64, 0u64, 0u64);
+        let mut report = CollisionReport::default();
         for substep in 0..settings.substeps {
             self.predict(settings.pressure, h, parallel);
             self.lambda_membrane.fill(0.0);
@@ -392,13 +423,16 @@ impl State {
             }
             // SPEC 1.1 step 3: collisions over x_t -> p, between the constraint sweeps and the
             // velocity update.
-            if settings.collisions {
-                let counts = self.resolve_collisions(settings);
-                candidates += counts.candidates;
-                tests += counts.ccd_tests;
-                contacts += counts.contacts;
+            if self.contact.is_some() {
+                let start = Instant::now();
+                let counts = self.resolve_collisions(settings, h);
+                report.counts.add(&counts);
+                report.seconds += start.elapsed().as_secs_f64();
             }
             self.update_velocities(settings, h, parallel)?;
+            if let Some(contact) = &self.contact {
+                contact.limit_velocities(&mut self.v, &self.inv_mass);
+            }
             if measure && substep + 1 == settings.substeps {
                 self.measure(settings, &coeff, parallel);
             }
@@ -407,29 +441,45 @@ impl State {
         if !volume.is_finite() {
             return Err(self.unstable(settings, "the enclosed volume became non-finite"));
         }
+        // SPEC 4: a shell turned inside out is a divergence, not a result.
+        if !(volume / self.rest_volume > 0.0) {
+            let what = format!("the shell turned inside out (V/V0 = {:.3})", volume / self.rest_volume);
+            return Err(self.inverted(settings, &what));
+        }
+        let flipped = self.flipped_normals();
+        if flipped * INVERTED_FRACTION_DENOMINATOR > self.triangles.len() {
+            let what = format!(
+                "{flipped} of {} triangle normals turned around in one step (the surface folded through itself)",
+                self.triangles.len()
+            );
+            return Err(self.inverted(settings, &what));
+        }
         self.stats.volume = volume;
         self.stats.volume_ratio = volume / self.rest_volume;
-        self.stats.collision_candidates = candidates;
-        self.stats.ccd_tests = tests;
-        self.stats.contacts = contacts;
+        self.stats.collision_candidates = report.counts.candidates;
+        self.stats.ccd_tests = report.counts.ccd_tests;
+        self.stats.contacts = report.counts.contacts;
+        self.collision_report = report;
         Ok(())
     }
 
     /// SPEC 1.6, the collision stage: finds the vertex-face and edge-edge pairs that come closer
-    /// than the collision thickness over x -> p and projects them apart, on `p`. The collision
-    /// module (issue 4) fills it; until then it finds nothing, allocates nothing and its
-    /// counters stay 0.
-    fn resolve_collisions(&mut self, _settings: &ShellSettings) -> CollisionCounts {
-        CollisionCounts::default()
+    /// than δ = collision_thickness × bounding-box diagonal over x -> p and projects them apart,
+    /// on `p`, to the side they came from (see `collision::self_contact`).
+    fn resolve_collisions(&mut self, settings: &ShellSettings, h: f32) -> ContactCounts {
+        let Some(contact) = self.contact.as_mut() else { return ContactCounts::default() };
+        let delta = settings.collision_thickness as f64 * self.diagonal as f64;
+        contact.resolve(&self.x, &mut self.p, &self.inv_mass, delta, h)
     }
 
     /// SPEC 1.1 step 1 with the pressure force of SPEC 1.2:
     /// `f_i = -P Σ_j (1/3) A_j n_j`, `v* = v + h w f`, `p = x + h v*`.
     fn predict(&mut self, pressure: f32, h: f32, parallel: bool) {
-        let (x, tris, offsets, faces, w) =
-            (&self.x, &self.triangles, &self.vertex_face_offsets, &self.vertex_faces, &self.inv_mass);
+        let (x, x_lo, tris, offsets, faces, w) =
+            (&self.x, &self.x_lo, &self.triangles, &self.vertex_face_offsets, &self.vertex_faces, &self.inv_mass);
         let v = Shared::new(&mut self.v);
         let p = Shared::new(&mut self.p);
+        let p_lo = Shared::new(&mut self.p_lo);
         // (1/3) A n = (1/6) (x_b - x_a) × (x_c - x_a).
         let scale = -pressure / 6.0;
         for_range(parallel, 0, x.len(), |i| {
@@ -443,7 +493,11 @@ impl State {
             unsafe {
                 let vi = v.get(i) + f * (scale * h * w[i]);
                 v.set(i, vi);
-                p.set(i, x[i] + vi * h);
+                // p = x + x_lo + h v*, keeping what rounding loses (Fast2Sum).
+                let dx = vi * h + x_lo[i];
+                let pi = x[i] + dx;
+                p.set(i, pi);
+                p_lo.set(i, dx - (pi - x[i]));
             }
         });
     }
@@ -479,14 +533,21 @@ impl State {
         }
         let damp = (1.0 - settings.damping * h).max(0.0);
         let inv_h = 1.0 / h;
-        let p = &self.p;
+        let (p, p_lo) = (&self.p, &self.p_lo);
         let xs = Shared::new(&mut self.x);
+        let lo = Shared::new(&mut self.x_lo);
         let vs = Shared::new(&mut self.v);
         for_range(parallel, 0, n, |i| {
             // SAFETY: each iteration touches only index i.
             unsafe {
-                vs.set(i, (p[i] - xs.get(i)) * (inv_h * damp));
+                // v = ((p + p_lo) - (x + x_lo)) / h: p - x is exact for nearby values, so a
+                // displacement below half an ulp of x still makes a velocity (issue: many
+                // substeps stalled in f32). x = p exactly (what the collision stage checked);
+                // the rest stays in x_lo.
+                let dx = (p[i] - xs.get(i)) + (p_lo[i] - lo.get(i));
+                vs.set(i, dx * (inv_h * damp));
                 xs.set(i, p[i]);
+                lo.set(i, p_lo[i]);
             }
         });
         Ok(())
@@ -524,6 +585,32 @@ impl State {
             ErrorKind::Unstable,
             format!("the shell diverged in step {}: {what}; the step was rolled back. {advice}", self.stats.step + 1),
         )
+    }
+
+    /// Triangles whose normal points against its direction at the start of the step.
+    fn flipped_normals(&self) -> usize {
+        let (x, old) = (&self.x, &self.x_backup);
+        self.triangles
+            .iter()
+            .filter(|t| {
+                let [a, b, c] = t.map(|v| v as usize);
+                let n0 = (old[b] - old[a]).cross(old[c] - old[a]);
+                let n1 = (x[b] - x[a]).cross(x[c] - x[a]);
+                n0.dot(n1) < 0.0
+            })
+            .count()
+    }
+
+    /// The inversion error: [`State::unstable`]'s advice plus what prevents an inversion.
+    fn inverted(&self, settings: &ShellSettings, what: &str) -> Error {
+        let base = self.unstable(settings, what);
+        let hint = if settings.collisions {
+            " A smaller time_step or more substeps keep the collision stage ahead of the motion."
+        } else {
+            " Turn collisions on (the shell then cannot pass through itself), or keep stop_volume_ratio above 0 so \
+             the run ends first; a smaller anisotropic inward_push also helps."
+        };
+        Error::new(ErrorKind::Unstable, format!("{}{hint}", base.message))
     }
 
     /// SPEC 1.7: V = 1/6 Σ x_a · (x_b × x_c) about the vertex centroid, in f64, summed in fixed

@@ -57,8 +57,8 @@ const BOUND: f32 = 100.0;
 /// it) and fails on any other broken case.
 pub const KNOWN_BODY_BUGS: &[(&str, &str)] = &[("volume driven to zero", "explicit Euler")];
 
-/// Shell cases that break the contract today: none of the stability cases (the many-substeps
-/// stall is its own ignored reproducer in tests/stability.rs).
+/// Shell cases that break the contract today: none (an inverted shell is rolled back and
+/// reported UNSTABLE, see `shell_inversion_is_reported_unstable` in tests/stability.rs).
 pub const KNOWN_SHELL_BUGS: &[(&str, &str)] = &[];
 
 pub fn is_known_bug(row: &Row) -> bool {

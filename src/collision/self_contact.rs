@@ -1,0 +1,606 @@
+//! Self-contact of a closed triangle mesh moving over one step (SPEC 1.6): swept-box BVHs of
+//! vertices, edges and faces refit every step (rebuilt when loose), candidate vertex-face and
+//! edge-edge pairs that share no vertex, the filters and the exact conservative CCD of
+//! [`super::ccd`], then the contact constraints `C_vf >= 0`, `C_ee >= 0` projected on the end
+//! positions, with the side taken from the start of the step.
+//!
+//! Guarantee: when the start positions are free of intersections, the end positions returned are
+//! too (the CCD never misses). Contacts are projected for a few rounds, each re-checking the pairs
+//! that the projection moved; if contacts remain after that, the vertices of the offending pairs
+//! are put back at their start positions (a fail-safe that ends: a pair whose four vertices are
+//! all back is the start configuration, free of intersections).
+//!
+//! Knows nothing of the simulator that moves the mesh (positions, inverse masses in; corrected
+//! positions and velocities out). Runs serially in a fixed order: results do not depend on
+//! threads. Allocates only when a step has more contacts than the last largest one.
+
+// NaN must fail every guard below, so comparisons are written `!(x > limit)` on purpose.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
+use glam::{DVec3, Vec3};
+
+use super::bvh::{Aabb, Bvh};
+use super::ccd::{CcdSettings, Stage, edge_edge_with, vertex_triangle_with};
+use super::filters::V3;
+use super::hull_filter::{edge_edge_hulls_separated, vertex_triangle_hulls_separated};
+
+/// Projection rounds (projection, then re-check of the moved pairs) before the fail-safe.
+const ROUNDS: usize = 6;
+/// Gauss-Seidel sweeps over the contacts in one round.
+const SWEEPS: usize = 4;
+/// Re-checks after a projection use this fraction of the thickness: a pair projected to the
+/// thickness is not found again because of rounding.
+const RECHECK_FRACTION: f64 = 0.5;
+
+/// What one call of [`SelfContact::resolve`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContactCounts {
+    /// Candidate pairs from the BVHs (first round), pairs sharing a vertex excluded.
+    pub candidates: u64,
+    /// Candidates left after the swept-hull separating-axis filter ([`super::hull_filter`]) and
+    /// the exact swept-box test of each pair.
+    pub after_boxes: u64,
+    /// Candidates left after the deforming non-penetration (plane) filter: exact tests run.
+    pub ccd_tests: u64,
+    /// Contact constraints projected (all rounds).
+    pub contacts: u64,
+    /// Vertices put back to their start positions by the fail-safe.
+    pub reverted: u64,
+    /// BVH rebuilds.
+    pub rebuilds: u64,
+    /// Rounds run (1 = no contact needed a re-check).
+    pub rounds: u64,
+}
+
+impl ContactCounts {
+    /// Adds `other` to `self` field by field.
+    pub fn add(&mut self, other: &ContactCounts) {
+        self.candidates += other.candidates;
+        self.after_boxes += other.after_boxes;
+        self.ccd_tests += other.ccd_tests;
+        self.contacts += other.contacts;
+        self.reverted += other.reverted;
+        self.rebuilds += other.rebuilds;
+        self.rounds += other.rounds;
+    }
+}
+
+/// One linearised contact: `C = n · Σ_k g_k p_k - δ >= 0` over four vertices.
+#[derive(Clone, Copy, Debug)]
+struct Contact {
+    idx: [u32; 4],
+    /// Weights: vertex-face `[1, -α1, -α2, -α3]`, edge-edge `[1-a, a, -(1-b), -b]`.
+    g: [f32; 4],
+    /// Unit normal pointing from the second primitive to the first at the start of the step.
+    n: Vec3,
+    /// Relative normal velocity before the contact was projected (predicted motion / h): the
+    /// velocity update never lets the pair separate faster than this (or than 0).
+    v_before: f32,
+}
+
+/// Self-contact of one mesh across steps.
+#[derive(Clone, Debug)]
+pub struct SelfContact {
+    edges: Vec<[u32; 2]>,
+    triangles: Vec<[u32; 3]>,
+    vertex_tree: Bvh,
+    edge_tree: Bvh,
+    face_tree: Bvh,
+    vertex_boxes: Vec<Aabb>,
+    edge_boxes: Vec<Aabb>,
+    face_boxes: Vec<Aabb>,
+    /// Per vertex: bit 0 = moved by the last projection round, bit 1 = put back by the fail-safe.
+    flags: Vec<u8>,
+    contacts: Vec<Contact>,
+    /// Pairs found in the current round: (kind 0 = vertex-face, 1 = edge-edge, i, j, toi).
+    hits: Vec<(u8, u32, u32, f64)>,
+    settings: CcdSettings,
+}
+
+const MOVED: u8 = 1;
+const REVERTED: u8 = 2;
+
+#[inline]
+fn d(v: Vec3) -> V3 {
+    [v.x as f64, v.y as f64, v.z as f64]
+}
+
+fn fill_boxes<const N: usize>(x0: &[Vec3], x1: &[Vec3], prims: &[[u32; N]], half: f64, out: &mut [Aabb]) {
+    for (prim, b) in prims.iter().zip(out.iter_mut()) {
+        let mut points = [[0.0; 3]; 6];
+        for (k, &v) in prim.iter().enumerate() {
+            points[2 * k] = d(x0[v as usize]);
+            points[2 * k + 1] = d(x1[v as usize]);
+        }
+        *b = Aabb::around(&points[..2 * N], half);
+    }
+}
+
+/// Closest point of `p` on triangle `abc`: barycentric weights (α_a, α_b, α_c) (Ericson,
+/// "Real-Time Collision Detection" 5.1.5).
+pub(crate) fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return [0.0, 1.0, 0.0];
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return [1.0 - v, v, 0.0];
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return [0.0, 0.0, 1.0];
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return [1.0 - w, 0.0, w];
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return [0.0, 1.0 - w, w];
+    }
+    let denom = va + vb + vc;
+    if !(denom.abs() > 0.0) {
+        return [1.0 / 3.0; 3]; // degenerate triangle
+    }
+    let (v, w) = (vb / denom, vc / denom);
+    [1.0 - v - w, v, w]
+}
+
+/// Parameters (s, t) of the closest points of segments p1q1 and p2q2 (Ericson 5.1.9).
+pub(crate) fn closest_segments(p1: DVec3, q1: DVec3, p2: DVec3, q2: DVec3) -> (f64, f64) {
+    let (d1, d2, r) = (q1 - p1, q2 - p2, p1 - p2);
+    let (a, e, f) = (d1.length_squared(), d2.length_squared(), d2.dot(r));
+    let tiny = 1e-300;
+    if a <= tiny && e <= tiny {
+        return (0.0, 0.0);
+    }
+    if a <= tiny {
+        return (0.0, (f / e).clamp(0.0, 1.0));
+    }
+    let c = d1.dot(r);
+    if e <= tiny {
+        return ((-c / a).clamp(0.0, 1.0), 0.0);
+    }
+    let b = d1.dot(d2);
+    let denom = a * e - b * b;
+    let mut s = if denom > 0.0 { ((b * f - c * e) / denom).clamp(0.0, 1.0) } else { 0.0 };
+    let mut t = (b * s + f) / e;
+    if t < 0.0 {
+        t = 0.0;
+        s = (-c / a).clamp(0.0, 1.0);
+    } else if t > 1.0 {
+        t = 1.0;
+        s = ((b - c) / a).clamp(0.0, 1.0);
+    }
+    (s, t)
+}
+
+fn lerp(x0: &[Vec3], x1: &[Vec3], v: u32, t: f64) -> DVec3 {
+    let (a, b) = (x0[v as usize].as_dvec3(), x1[v as usize].as_dvec3());
+    a + (b - a) * t
+}
+
+/// The side a pair came from: the sign of `n · w0` at the start, or of the motion's reverse.
+fn side(n: DVec3, w_start: DVec3, w_end: DVec3) -> f64 {
+    let s0 = n.dot(w_start);
+    if s0 != 0.0 {
+        return s0.signum();
+    }
+    let motion = n.dot(w_end - w_start);
+    if motion != 0.0 { -motion.signum() } else { 1.0 }
+}
+
+impl SelfContact {
+    /// Builds the trees for a mesh at rest (`x` at both ends of the step).
+    pub fn new(x: &[Vec3], edges: &[[u32; 2]], triangles: &[[u32; 3]]) -> Self {
+        let mut vertex_boxes = vec![Aabb::EMPTY; x.len()];
+        let mut edge_boxes = vec![Aabb::EMPTY; edges.len()];
+        let mut face_boxes = vec![Aabb::EMPTY; triangles.len()];
+        let ids: Vec<[u32; 1]> = (0..x.len() as u32).map(|v| [v]).collect();
+        fill_boxes(x, x, &ids, 0.0, &mut vertex_boxes);
+        fill_boxes(x, x, edges, 0.0, &mut edge_boxes);
+        fill_boxes(x, x, triangles, 0.0, &mut face_boxes);
+        // A few contacts per hundred vertices before the first reallocation.
+        let reserve = 64 + x.len() / 16;
+        Self {
+            edges: edges.to_vec(),
+            triangles: triangles.to_vec(),
+            vertex_tree: Bvh::build(vertex_boxes.clone()),
+            edge_tree: Bvh::build(edge_boxes.clone()),
+            face_tree: Bvh::build(face_boxes.clone()),
+            vertex_boxes,
+            edge_boxes,
+            face_boxes,
+            flags: vec![0; x.len()],
+            contacts: Vec::with_capacity(reserve),
+            hits: Vec::with_capacity(reserve),
+            settings: CcdSettings::default(),
+        }
+    }
+
+    /// Heap and struct bytes (the trees' node arrays are estimated from the leaf size: at most
+    /// one 64-byte node per two primitives).
+    pub fn memory_bytes(&self) -> usize {
+        fn b<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        let tree = |n: usize| n * (std::mem::size_of::<Aabb>() + 4) + n.div_ceil(2) * 64;
+        std::mem::size_of::<Self>()
+            + b(&self.edges)
+            + b(&self.triangles)
+            + tree(self.vertex_boxes.len())
+            + tree(self.edge_boxes.len())
+            + tree(self.face_boxes.len())
+            + b(&self.vertex_boxes)
+            + b(&self.edge_boxes)
+            + b(&self.face_boxes)
+            + b(&self.flags)
+            + b(&self.contacts)
+            + b(&self.hits)
+    }
+
+    fn refit(&mut self, x0: &[Vec3], x1: &[Vec3], half: f64) -> u64 {
+        for (v, b) in self.vertex_boxes.iter_mut().enumerate() {
+            *b = Aabb::around(&[d(x0[v]), d(x1[v])], half);
+        }
+        fill_boxes(x0, x1, &self.edges, half, &mut self.edge_boxes);
+        fill_boxes(x0, x1, &self.triangles, half, &mut self.face_boxes);
+        u64::from(self.vertex_tree.update(&self.vertex_boxes))
+            + u64::from(self.edge_tree.update(&self.edge_boxes))
+            + u64::from(self.face_tree.update(&self.face_boxes))
+    }
+
+    /// Finds the pairs that may come within `thickness` over `x0 -> x1` into `self.hits`.
+    /// With `only_moved`, only pairs with a vertex flagged MOVED are tested; pairs whose four
+    /// vertices were all put back are skipped (they do not move).
+    fn detect(&mut self, x0: &[Vec3], x1: &[Vec3], thickness: f64, only_moved: bool, counts: &mut ContactCounts) {
+        self.hits.clear();
+        let (tris, edges, flags, settings) = (&self.triangles, &self.edges, &self.flags, &self.settings);
+        let hits = &mut self.hits;
+        let first = !only_moved;
+        // Stage None: refuted by the hull filter.
+        let mut tally = |stage: Option<Stage>| {
+            if first {
+                counts.candidates += 1;
+                if let Some(stage) = stage.filter(|&s| s != Stage::SweptAabb) {
+                    counts.after_boxes += 1;
+                    if stage != Stage::PlaneFilter {
+                        counts.ccd_tests += 1;
+                    }
+                }
+            }
+        };
+        let wanted = |idx: [u32; 4]| {
+            let f = idx.map(|v| flags[v as usize]);
+            if f.iter().all(|&x| x & REVERTED != 0) {
+                return false;
+            }
+            !only_moved || f.iter().any(|&x| x & MOVED != 0)
+        };
+        // One pair: kind 0 = (vertex, face), 1 = (edge, edge).
+        let mut test = |kind: u8, i: u32, j: u32| {
+            if kind == 0 {
+                let (v, f) = (i, j);
+                let t = tris[f as usize];
+                if t.contains(&v) || !wanted([v, t[0], t[1], t[2]]) {
+                    return;
+                }
+                let start = [d(x0[v as usize]), d(x0[t[0] as usize]), d(x0[t[1] as usize]), d(x0[t[2] as usize])];
+                let end = [d(x1[v as usize]), d(x1[t[0] as usize]), d(x1[t[1] as usize]), d(x1[t[2] as usize])];
+                if vertex_triangle_hulls_separated(&start, &end, thickness) {
+                    tally(None);
+                    return;
+                }
+                let out = vertex_triangle_with(&start, &end, thickness, settings);
+                tally(Some(out.stage));
+                if let Some(toi) = out.toi {
+                    hits.push((0, v, f, toi));
+                }
+            } else {
+                let (i, j) = (i.min(j), i.max(j));
+                let ([a, b], [c, e]) = (edges[i as usize], edges[j as usize]);
+                if a == c || a == e || b == c || b == e || !wanted([a, b, c, e]) {
+                    return;
+                }
+                let start = [d(x0[a as usize]), d(x0[b as usize]), d(x0[c as usize]), d(x0[e as usize])];
+                let end = [d(x1[a as usize]), d(x1[b as usize]), d(x1[c as usize]), d(x1[e as usize])];
+                if edge_edge_hulls_separated(&start, &end, thickness) {
+                    tally(None);
+                    return;
+                }
+                let out = edge_edge_with(&start, &end, thickness, settings);
+                tally(Some(out.stage));
+                if let Some(toi) = out.toi {
+                    hits.push((1, i, j, toi));
+                }
+            }
+        };
+        if !only_moved {
+            self.vertex_tree.for_each_overlap(&self.face_tree, |v, f| test(0, v, f));
+            self.edge_tree.for_each_self_overlap(|i, j| test(1, i, j));
+        } else {
+            // Only primitives with a moved vertex: small trees over them, queried against the
+            // full ones (a pair of two moved primitives may come twice: deduplicated below).
+            let moved = |v: u32| flags[v as usize] & MOVED != 0;
+            let mv: Vec<u32> = (0..flags.len() as u32).filter(|&v| moved(v)).collect();
+            let mf: Vec<u32> = (0..tris.len() as u32).filter(|&f| tris[f as usize].iter().any(|&v| moved(v))).collect();
+            let me: Vec<u32> =
+                (0..edges.len() as u32).filter(|&e| edges[e as usize].iter().any(|&v| moved(v))).collect();
+            let subset = |ids: &[u32], boxes: &[Aabb]| Bvh::build(ids.iter().map(|&i| boxes[i as usize]).collect());
+            subset(&mv, &self.vertex_boxes).for_each_overlap(&self.face_tree, |k, f| test(0, mv[k as usize], f));
+            self.vertex_tree.for_each_overlap(&subset(&mf, &self.face_boxes), |v, k| test(0, v, mf[k as usize]));
+            subset(&me, &self.edge_boxes).for_each_overlap(&self.edge_tree, |k, j| test(1, me[k as usize], j));
+        }
+        // The traversal order is fixed, but sort anyway so the projection order is the pairs'.
+        self.hits.sort_unstable_by(|x, y| (x.0, x.1, x.2).cmp(&(y.0, y.1, y.2)));
+        self.hits.dedup_by(|x, y| (x.0, x.1, x.2) == (y.0, y.1, y.2));
+    }
+
+    /// A contact constraint for hit `k` of `self.hits`: weights and barycentrics at the time of
+    /// impact, normal from the configuration there, side from the start of the step.
+    fn contact_of(&self, hit: (u8, u32, u32, f64), x0: &[Vec3], x1: &[Vec3], h: f32) -> Option<Contact> {
+        let (kind, i, j, toi) = hit;
+        let (idx, g, n) = if kind == 0 {
+            let t = self.triangles[j as usize];
+            let idx = [i, t[0], t[1], t[2]];
+            let y = idx.map(|v| lerp(x0, x1, v, toi));
+            let s = idx.map(|v| x0[v as usize].as_dvec3());
+            let e = idx.map(|v| x1[v as usize].as_dvec3());
+            let al = closest_on_triangle(y[0], y[1], y[2], y[3]);
+            let q = |p: &[DVec3; 4]| p[0] - (p[1] * al[0] + p[2] * al[1] + p[3] * al[2]);
+            let mut n = (y[2] - y[1]).cross(y[3] - y[1]);
+            if !(n.length_squared() > 0.0) {
+                n = q(&y);
+            }
+            let n = n.normalize_or_zero();
+            if n == DVec3::ZERO {
+                return None;
+            }
+            let n = n * side(n, q(&s), q(&e));
+            (idx, [1.0, -al[0], -al[1], -al[2]], n)
+        } else {
+            let ([a, b], [c, e]) = (self.edges[i as usize], self.edges[j as usize]);
+            let idx = [a, b, c, e];
+            let y = idx.map(|v| lerp(x0, x1, v, toi));
+            let s = idx.map(|v| x0[v as usize].as_dvec3());
+            let en = idx.map(|v| x1[v as usize].as_dvec3());
+            let (sa, sb) = closest_segments(y[0], y[1], y[2], y[3]);
+            let w = |p: &[DVec3; 4]| (p[0] * (1.0 - sa) + p[1] * sa) - (p[2] * (1.0 - sb) + p[3] * sb);
+            let (e1, e2) = (y[1] - y[0], y[3] - y[2]);
+            let mut n = e1.cross(e2);
+            // Nearly parallel edges: the cross product's direction is noise; use the gap.
+            if !(n.length_squared() > 1e-12 * e1.length_squared() * e2.length_squared()) {
+                n = w(&y);
+                if !(n.length_squared() > 0.0) {
+                    n = w(&s);
+                }
+            }
+            let n = n.normalize_or_zero();
+            if n == DVec3::ZERO {
+                return None;
+            }
+            let n = n * side(n, w(&s), w(&en));
+            (idx, [1.0 - sa, sa, -(1.0 - sb), -sb], n)
+        };
+        let g = g.map(|x| x as f32);
+        let n = n.as_vec3();
+        let mut rel = Vec3::ZERO;
+        for k in 0..4 {
+            rel += (x1[idx[k] as usize] - x0[idx[k] as usize]) * g[k];
+        }
+        Some(Contact { idx, g, n, v_before: n.dot(rel) / h })
+    }
+
+    /// Resolves self-contact over the step `x0 -> p` at contact distance `thickness`: corrects
+    /// `p` in place (vertices with inverse mass 0 do not move). `h` is the (sub)step length, for
+    /// the velocities of [`SelfContact::limit_velocities`].
+    pub fn resolve(&mut self, x0: &[Vec3], p: &mut [Vec3], inv_mass: &[f32], thickness: f64, h: f32) -> ContactCounts {
+        let mut counts = ContactCounts::default();
+        self.contacts.clear();
+        self.flags.fill(0);
+        counts.rebuilds += self.refit(x0, p, 0.5 * thickness);
+        for round in 0..ROUNDS {
+            counts.rounds += 1;
+            let check = if round == 0 { thickness } else { RECHECK_FRACTION * thickness };
+            if round > 0 {
+                counts.rebuilds += self.refit(x0, p, 0.5 * check);
+            }
+            self.detect(x0, p, check, round > 0, &mut counts);
+            if self.hits.is_empty() {
+                return counts;
+            }
+            let first_new = self.contacts.len();
+            for k in 0..self.hits.len() {
+                if let Some(c) = self.contact_of(self.hits[k], x0, p, h) {
+                    self.contacts.push(c);
+                }
+            }
+            counts.contacts += (self.contacts.len() - first_new) as u64;
+            self.flags.fill(0);
+            self.project(p, inv_mass, thickness as f32);
+            // Re-check every pair found (its constraint may hold at the end of the step while its
+            // path still crosses) besides every pair the projection moved.
+            for k in 0..self.hits.len() {
+                for v in self.hit_vertices(k) {
+                    self.flags[v as usize] |= MOVED;
+                }
+            }
+        }
+        // Fail-safe: contacts remain after the projection rounds. Put the vertices of every pair
+        // that may still intersect (thickness 0) back to the start, until none does.
+        // Pairs whose trajectories did not change since they were last found clear (at a larger
+        // thickness) stay clear: only pairs with a vertex moved by the last projection, then with
+        // a vertex newly put back, are tested.
+        loop {
+            counts.rounds += 1;
+            counts.rebuilds += self.refit(x0, p, 0.0);
+            self.detect(x0, p, 0.0, true, &mut ContactCounts::default());
+            for f in &mut self.flags {
+                *f &= REVERTED;
+            }
+            if self.hits.is_empty() {
+                return counts;
+            }
+            for k in 0..self.hits.len() {
+                for v in self.hit_vertices(k) {
+                    if self.flags[v as usize] & REVERTED == 0 {
+                        self.flags[v as usize] |= REVERTED | MOVED;
+                        p[v as usize] = x0[v as usize];
+                        counts.reverted += 1;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The four vertices of hit `k`.
+    fn hit_vertices(&self, k: usize) -> [u32; 4] {
+        let (kind, i, j, _) = self.hits[k];
+        if kind == 0 {
+            let t = self.triangles[j as usize];
+            [i, t[0], t[1], t[2]]
+        } else {
+            let ([a, b], [c, e]) = (self.edges[i as usize], self.edges[j as usize]);
+            [a, b, c, e]
+        }
+    }
+
+    /// Gauss-Seidel over the contacts: `Δλ = -C / Σ w_k g_k²`, `Δp_k = w_k g_k Δλ n` when `C < 0`.
+    /// Flags every vertex it moves.
+    fn project(&mut self, p: &mut [Vec3], inv_mass: &[f32], thickness: f32) {
+        for _ in 0..SWEEPS {
+            for c in &self.contacts {
+                let mut gap = -thickness;
+                let mut denom = 0.0;
+                for k in 0..4 {
+                    let v = c.idx[k] as usize;
+                    gap += c.g[k] * c.n.dot(p[v]);
+                    denom += inv_mass[v] * c.g[k] * c.g[k];
+                }
+                if !(gap < 0.0) || !(denom > 0.0) {
+                    continue;
+                }
+                let dl = -gap / denom;
+                for k in 0..4 {
+                    let v = c.idx[k] as usize;
+                    let step = inv_mass[v] * c.g[k] * dl;
+                    if step != 0.0 {
+                        p[v] += c.n * step;
+                        self.flags[v] |= MOVED;
+                    }
+                }
+            }
+        }
+    }
+
+    /// After the velocity update: no contact of the last [`SelfContact::resolve`] may leave with a
+    /// relative normal velocity larger than it had before the contact (or 0), so the push out of
+    /// the thickness adds no energy (an inelastic, mass-weighted normal impulse can only remove
+    /// kinetic energy).
+    pub fn limit_velocities(&self, v: &mut [Vec3], inv_mass: &[f32]) {
+        for c in &self.contacts {
+            let mut rel = 0.0;
+            let mut denom = 0.0;
+            for k in 0..4 {
+                let i = c.idx[k] as usize;
+                rel += c.g[k] * c.n.dot(v[i]);
+                denom += inv_mass[i] * c.g[k] * c.g[k];
+            }
+            let allowed = c.v_before.max(0.0);
+            if !(rel > allowed) || !(denom > 0.0) {
+                continue;
+            }
+            let dl = (allowed - rel) / denom;
+            for k in 0..4 {
+                let i = c.idx[k] as usize;
+                v[i] += c.n * (inv_mass[i] * c.g[k] * dl);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two parallel unit squares (two triangles each), `gap` apart along z.
+    fn two_plates(gap: f32) -> (Vec<Vec3>, Vec<[u32; 3]>, Vec<[u32; 2]>) {
+        let mut x = Vec::new();
+        for z in [0.0, gap] {
+            x.extend([Vec3::new(0.0, 0.0, z), Vec3::new(1.0, 0.0, z), Vec3::new(1.0, 1.0, z), Vec3::new(0.0, 1.0, z)]);
+        }
+        let tris = vec![[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]];
+        let edges = crate::mesh::Topology::build(&tris, x.len()).edges;
+        (x, tris, edges)
+    }
+
+    #[test]
+    fn a_plate_pushed_through_another_stays_on_its_side() {
+        let (x0, tris, edges) = two_plates(0.1);
+        // The upper plate moves down through the lower one, slightly tilted.
+        let mut p: Vec<Vec3> = x0
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| if i >= 4 { v - Vec3::new(0.0, 0.0, 0.3 + 0.01 * i as f32) } else { v })
+            .collect();
+        let w = vec![1.0; x0.len()];
+        let mut sc = SelfContact::new(&x0, &edges, &tris);
+        let counts = sc.resolve(&x0, &mut p, &w, 1e-3, 0.01);
+        assert!(counts.contacts > 0 && counts.ccd_tests > 0, "{counts:?}");
+        for j in 0..4 {
+            // Each corner of the upper plate stays above the same corner of the lower one.
+            assert!(p[j + 4].z > p[j].z, "corner {j}: {} not above {}", p[j + 4].z, p[j].z);
+        }
+        // Nothing left to find.
+        let mut again = SelfContact::new(&x0, &edges, &tris);
+        let mut q = p.clone();
+        let c = again.resolve(&x0, &mut q, &w, 0.0, 0.01);
+        assert_eq!(c.contacts, 0, "{c:?}");
+        assert_eq!(q, p);
+    }
+
+    #[test]
+    fn contact_velocities_do_not_gain_energy() {
+        let (x0, tris, edges) = two_plates(0.1);
+        let h = 0.01;
+        let mut p: Vec<Vec3> =
+            x0.iter().enumerate().map(|(i, &v)| if i >= 4 { v - Vec3::new(0.0, 0.0, 0.2) } else { v }).collect();
+        let w = vec![1.0; x0.len()];
+        let mut sc = SelfContact::new(&x0, &edges, &tris);
+        let before: f32 = p.iter().zip(&x0).map(|(a, b)| ((*a - *b) / h).length_squared()).sum();
+        sc.resolve(&x0, &mut p, &w, 1e-3, h);
+        let mut v: Vec<Vec3> = p.iter().zip(&x0).map(|(a, b)| (*a - *b) / h).collect();
+        sc.limit_velocities(&mut v, &w);
+        let after: f32 = v.iter().map(|a| a.length_squared()).sum();
+        assert!(after <= before, "{before} -> {after}");
+        // No pair separates along its normal after the contact.
+        for i in 4..8 {
+            assert!(v[i].z <= 1e-4, "{:?}", v[i]);
+        }
+    }
+
+    #[test]
+    fn closest_points_match_simple_cases() {
+        let (a, b, c) = (DVec3::ZERO, DVec3::X, DVec3::Y);
+        assert_eq!(closest_on_triangle(DVec3::new(0.25, 0.25, 1.0), a, b, c), [0.5, 0.25, 0.25]);
+        assert_eq!(closest_on_triangle(DVec3::new(-1.0, -1.0, 0.0), a, b, c), [1.0, 0.0, 0.0]);
+        let (s, t) = closest_segments(
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::X,
+            DVec3::new(0.5, -1.0, 1.0),
+            DVec3::new(0.5, 1.0, 1.0),
+        );
+        assert!((s - 0.5).abs() < 1e-12 && (t - 0.5).abs() < 1e-12);
+    }
+}
