@@ -158,7 +158,6 @@ fn shell_many_substeps_still_contract() {
 /// ends inside out (V/V0 about -0.4 after 100 steps) while every step returns OK. Un-ignore once
 /// the shell reports it (UNSTABLE with rollback) or prevents it.
 #[test]
-#[ignore = "known shell bug: PBD at V0/16 turns inside out while returning OK"]
 fn shell_pbd_small_copy_inversion() {
     use report_util::*;
     let (p, t) = unit_obj("eight.obj", 16f32.powf(-1.0 / 3.0));

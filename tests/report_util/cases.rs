@@ -286,8 +286,15 @@ pub fn shell_rows() -> Vec<Row> {
             ),
         );
         push("tetrahedron", run_shell(&tet_p, &tet_t, &base, 30));
-        let def = SoftshellShellDef { pressure: base.pressure * 100.0, ..base };
-        push("volume driven to zero (P x100, 300 steps)", run_shell(&sphere_p, &sphere_t, &def, 300));
+        // Self-collision keeps a crushed shell from reaching zero volume (and resolving its
+        // thousands of contacts for 300 steps costs minutes), so this case, about the volume
+        // itself going to zero, runs without it; collisions under extreme pressure are covered
+        // by "pressure x1e4" here and by tests/shell_collision.rs.
+        let def = SoftshellShellDef { pressure: base.pressure * 100.0, collisions: false, ..base };
+        push(
+            "volume driven to zero (P x100, 300 steps, no self-collision)",
+            run_shell(&sphere_p, &sphere_t, &def, 300),
+        );
         let (eight_p, eight_t) = unit_obj("eight.obj", 1.0);
         let region = cap_faces(&eight_p, &eight_t, 0.2);
         let outcome = match Shell::new(&eight_p, &eight_t, &base) {
