@@ -20,7 +20,7 @@ use super::surface::{Fracture, Nodes, build_springs};
 use super::wind::add_wind;
 use super::xpbd::{self, XpbdScratch};
 use crate::error::{Error, ErrorKind, Result};
-use crate::mesh::{Topology, TriMesh, require_closed_oriented_solid};
+use crate::mesh::{Topology, TriMesh, first_degenerate_triangle, require_closed_oriented_solid};
 use crate::parallel::WorkerPool;
 
 /// What one step did (the Rust side of `SoftshellBodyStats`).
@@ -122,15 +122,17 @@ fn triangle_area(x: &[Vec3], t: [u32; 3]) -> f64 {
 
 impl Body {
     /// Makes a body from `mesh` (with its `topology`). With gas the mesh must be a closed,
-    /// manifold, outward-oriented solid; without gas any mesh whose triangles have three distinct
-    /// corners and whose edges have a length will do (cloth).
+    /// manifold, outward-oriented solid; without gas any mesh whose triangles have non-zero area
+    /// and whose edges have a length will do (cloth).
     pub fn new(mesh: &TriMesh, topology: &Topology, settings: BodySettings) -> Result<Self> {
         let x = mesh.positions().to_vec();
         let triangles = mesh.triangles().to_vec();
-        if let Some((t, tri)) = triangles.iter().enumerate().find(|(_, t)| t[0] == t[1] || t[1] == t[2] || t[0] == t[2])
-        {
+        // SPEC 4: zero-area triangles are refused with their index, cloth or not: they have no
+        // normal for wind and gas, and no area to give their corners mass.
+        if let Some(t) = first_degenerate_triangle(mesh) {
+            let tri = triangles[t];
             return Err(Error::invalid_mesh(format!(
-                "a soft body needs triangles with three distinct corners: triangle {t} is ({}, {}, {})",
+                "a soft body needs triangles of non-zero area: triangle {t} ({}, {}, {}) is degenerate (a repeated corner or three corners on one line)",
                 tri[0], tri[1], tri[2]
             )));
         }

@@ -20,7 +20,7 @@ pub use measures::{
 #[cfg(feature = "obj")]
 pub use obj::{load_obj, save_obj};
 pub use ply::{VertexScalar, save_ply};
-pub use report::{MeshReport, require_closed_oriented_solid};
+pub use report::{MeshReport, first_degenerate_triangle, require_closed_oriented_solid};
 pub(crate) use topology::NO_FACE;
 pub use topology::Topology;
 pub use tri_mesh::TriMesh;

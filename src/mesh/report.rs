@@ -62,6 +62,12 @@ fn is_degenerate(mesh: &TriMesh, t: usize) -> bool {
     (pb - pa).cross(pc - pa).length() <= DEGENERATE_RELATIVE_AREA * longest
 }
 
+/// Index of the first degenerate (zero-area) triangle of `mesh`, if any: a repeated corner, or
+/// corners on one line (twice the area below 1e-9 of the longest side squared).
+pub fn first_degenerate_triangle(mesh: &TriMesh) -> Option<usize> {
+    (0..mesh.triangle_count()).find(|&t| is_degenerate(mesh, t))
+}
+
 impl MeshReport {
     /// Computes the report of `mesh` with its `topology`.
     pub fn new(mesh: &TriMesh, topology: &Topology) -> Self {
