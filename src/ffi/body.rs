@@ -529,6 +529,24 @@ pub unsafe extern "C" fn softshell_body_step(
     })
 }
 
+/// The body of a getter that returns a plain value: `$value` of a live, unpoisoned body; 0 for
+/// NULL, for a poisoned body and in a build without the `body` feature. Panics are caught.
+macro_rules! body_getter {
+    ($name:literal, $body:ident, |$b:ident| $value:expr) => {
+        value_call($name, 0, || {
+            #[cfg(feature = "body")]
+            {
+                read_body($body, 0, |$b| $value)
+            }
+            #[cfg(not(feature = "body"))]
+            {
+                let _ = $body;
+                0
+            }
+        })
+    };
+}
+
 #[cfg(feature = "body")]
 fn read_body<T>(body: *const SoftshellBody, fallback: T, f: impl FnOnce(&Body) -> T) -> T {
     // SAFETY: the caller promises a live body or NULL.
@@ -546,17 +564,7 @@ fn read_body<T>(body: *const SoftshellBody, fallback: T, f: impl FnOnce(&Body) -
 /// `body` must be NULL or a live body.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn softshell_body_topology_generation(body: *const SoftshellBody) -> u64 {
-    value_call("softshell_body_topology_generation", 0, || {
-        #[cfg(feature = "body")]
-        {
-            read_body(body, 0, |b| b.topology_generation())
-        }
-        #[cfg(not(feature = "body"))]
-        {
-            let _ = body;
-            0
-        }
-    })
+    body_getter!("softshell_body_topology_generation", body, |b| b.topology_generation())
 }
 
 /// Number of vertices now (grows with fracture); 0 for NULL.
@@ -565,17 +573,7 @@ pub unsafe extern "C" fn softshell_body_topology_generation(body: *const Softshe
 /// `body` must be NULL or a live body.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn softshell_body_vertex_count(body: *const SoftshellBody) -> usize {
-    value_call("softshell_body_vertex_count", 0, || {
-        #[cfg(feature = "body")]
-        {
-            read_body(body, 0, |b| b.positions().len())
-        }
-        #[cfg(not(feature = "body"))]
-        {
-            let _ = body;
-            0
-        }
-    })
+    body_getter!("softshell_body_vertex_count", body, |b| b.positions().len())
 }
 
 /// Number of triangles now (grows when core blocks are released); 0 for NULL.
@@ -584,17 +582,7 @@ pub unsafe extern "C" fn softshell_body_vertex_count(body: *const SoftshellBody)
 /// `body` must be NULL or a live body.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn softshell_body_triangle_count(body: *const SoftshellBody) -> usize {
-    value_call("softshell_body_triangle_count", 0, || {
-        #[cfg(feature = "body")]
-        {
-            read_body(body, 0, |b| b.triangles().len())
-        }
-        #[cfg(not(feature = "body"))]
-        {
-            let _ = body;
-            0
-        }
-    })
+    body_getter!("softshell_body_triangle_count", body, |b| b.triangles().len())
 }
 
 /// Number of connected pieces (fragments) now; 0 for NULL.
@@ -603,17 +591,7 @@ pub unsafe extern "C" fn softshell_body_triangle_count(body: *const SoftshellBod
 /// `body` must be NULL or a live body.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn softshell_body_fragment_count(body: *const SoftshellBody) -> usize {
-    value_call("softshell_body_fragment_count", 0, || {
-        #[cfg(feature = "body")]
-        {
-            read_body(body, 0, |b| b.fragment_count())
-        }
-        #[cfg(not(feature = "body"))]
-        {
-            let _ = body;
-            0
-        }
-    })
+    body_getter!("softshell_body_fragment_count", body, |b| b.fragment_count())
 }
 
 /// Heap bytes held by the body (positions, springs, gas and fracture bookkeeping, scratch);
@@ -624,17 +602,7 @@ pub unsafe extern "C" fn softshell_body_fragment_count(body: *const SoftshellBod
 /// `body` must be NULL or a live body.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn softshell_body_memory_bytes(body: *const SoftshellBody) -> usize {
-    value_call("softshell_body_memory_bytes", 0, || {
-        #[cfg(feature = "body")]
-        {
-            read_body(body, 0, |b| b.memory_bytes())
-        }
-        #[cfg(not(feature = "body"))]
-        {
-            let _ = body;
-            0
-        }
-    })
+    body_getter!("softshell_body_memory_bytes", body, |b| b.memory_bytes())
 }
 
 /// Shared body of the copy functions: `len` elements filled by `fill` from the body.

@@ -21,6 +21,7 @@ pub use measures::{
 pub use obj::{load_obj, save_obj};
 pub use ply::{VertexScalar, save_ply};
 pub use report::{MeshReport, first_degenerate_triangle, require_closed_oriented_solid};
+#[cfg(feature = "body")]
 pub(crate) use topology::NO_FACE;
 pub use topology::Topology;
 pub use tri_mesh::TriMesh;
