@@ -13,77 +13,15 @@
 //! Also measured: the cost of a step that cracks against a plain step, and stability at 1/15 s.
 //! Run with `cargo bench --bench body_balloon` (add `-- quick` for 200 steps).
 
-use std::collections::HashMap;
 use std::time::Instant;
 
 use softshell::ffi::body::*;
 use softshell::ffi::mesh::*;
 use softshell::ffi::{SoftshellBody, SoftshellStatus};
 
-fn icosphere(levels: u32) -> (Vec<f32>, Vec<u32>) {
-    let t = (1.0 + 5.0f64.sqrt()) / 2.0;
-    let mut p: Vec<[f64; 3]> = vec![
-        [-1.0, t, 0.0],
-        [1.0, t, 0.0],
-        [-1.0, -t, 0.0],
-        [1.0, -t, 0.0],
-        [0.0, -1.0, t],
-        [0.0, 1.0, t],
-        [0.0, -1.0, -t],
-        [0.0, 1.0, -t],
-        [t, 0.0, -1.0],
-        [t, 0.0, 1.0],
-        [-t, 0.0, -1.0],
-        [-t, 0.0, 1.0],
-    ];
-    let mut f: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..levels {
-        let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
-        let mut next = Vec::with_capacity(f.len() * 4);
-        for tri in &f {
-            let mut m = [0u32; 3];
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                m[k] = *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    let (pa, pb) = (p[a as usize], p[b as usize]);
-                    p.push([(pa[0] + pb[0]) / 2.0, (pa[1] + pb[1]) / 2.0, (pa[2] + pb[2]) / 2.0]);
-                    (p.len() - 1) as u32
-                });
-            }
-            next.extend([[tri[0], m[0], m[2]], [tri[1], m[1], m[0]], [tri[2], m[2], m[1]], [m[0], m[1], m[2]]]);
-        }
-        f = next;
-    }
-    let positions = p
-        .iter()
-        .flat_map(|q| {
-            let l = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
-            q.map(|c| (c / l) as f32)
-        })
-        .collect();
-    (positions, f.into_iter().flatten().collect())
-}
+// The tests' mesh builders (an icosphere made in code), shared rather than copied.
+#[path = "../tests/body_util/mod.rs"]
+mod body_util;
 
 /// Σ L0² over the edges of a mesh.
 fn sum_rest_squared(positions: &[f32], triangles: &[u32]) -> f64 {
@@ -218,7 +156,7 @@ fn volume_factor(positions: &[f32], triangles: &[u32]) -> f64 {
 fn main() {
     let quick = std::env::args().any(|a| a == "quick");
     let steps = if quick { 200 } else { 600 };
-    let (mut positions, triangles) = icosphere(5);
+    let (mut positions, triangles) = body_util::icosphere(5, 1.0);
     let vertices = positions.len() / 3;
     let sum_l2 = sum_rest_squared(&positions, &triangles);
     let n_rt = 2500.0f64;
