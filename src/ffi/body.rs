@@ -9,7 +9,7 @@ use super::boundary::{
     out_arg, status_call, value_call,
 };
 #[cfg(feature = "body")]
-use super::boundary::{copy_out, write_out};
+use super::boundary::{copy_out, write_out, write_triples};
 use super::mesh::SoftshellMesh;
 #[cfg(feature = "body")]
 use crate::body::{Body, BodySettings, BodyStats, Integrator, Obstacle};
@@ -648,11 +648,7 @@ pub unsafe extern "C" fn softshell_body_copy_positions(
             capacity,
             out_len,
             |b| b.positions().len() * 3,
-            |b, dst| {
-                for (chunk, p) in dst.chunks_exact_mut(3).zip(b.positions()) {
-                    chunk.copy_from_slice(&p.to_array());
-                }
-            },
+            |b, dst| write_triples(dst, b.positions().iter().map(|p| p.to_array())),
         )
     }
     #[cfg(not(feature = "body"))]
@@ -684,11 +680,7 @@ pub unsafe extern "C" fn softshell_body_copy_velocities(
             capacity,
             out_len,
             |b| b.velocities().len() * 3,
-            |b, dst| {
-                for (chunk, p) in dst.chunks_exact_mut(3).zip(b.velocities()) {
-                    chunk.copy_from_slice(&p.to_array());
-                }
-            },
+            |b, dst| write_triples(dst, b.velocities().iter().map(|p| p.to_array())),
         )
     }
     #[cfg(not(feature = "body"))]
@@ -754,11 +746,7 @@ pub unsafe extern "C" fn softshell_body_copy_triangles(
             capacity,
             out_len,
             |b| b.triangles().len() * 3,
-            |b, dst| {
-                for (chunk, t) in dst.chunks_exact_mut(3).zip(b.triangles()) {
-                    chunk.copy_from_slice(t);
-                }
-            },
+            |b, dst| write_triples(dst, b.triangles().iter().copied()),
         )
     }
     #[cfg(not(feature = "body"))]

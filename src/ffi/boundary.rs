@@ -368,6 +368,14 @@ pub(crate) unsafe fn copy_out<T>(
     Ok(())
 }
 
+/// Writes `triples` one after another into `dst` (x,y,z or a,b,c per item): the layout of every
+/// flat `float *` / `uint32_t *` buffer of the ABI.
+pub(crate) fn write_triples<T: Copy>(dst: &mut [T], triples: impl IntoIterator<Item = [T; 3]>) {
+    for (chunk, triple) in dst.chunks_exact_mut(3).zip(triples) {
+        chunk.copy_from_slice(&triple);
+    }
+}
+
 /// Checks a def's private cookie, so a def that was not made by its default function (stack
 /// garbage, a zeroed struct, a def of another kind) is refused instead of being trusted.
 pub(crate) fn check_cookie(cookie: u32, expected: u32, def_name: &str, default_fn: &str) -> Result<()> {

@@ -6,7 +6,7 @@
 
 use super::boundary::{
     Poisonable, SoftshellStatus, arg_ref, arg_slice, arg_vec3, check_cookie, copy_out, handle_call, handle_read,
-    out_arg, status_call, value_call, write_out,
+    out_arg, status_call, value_call, write_out, write_triples,
 };
 #[cfg(not(feature = "lattice"))]
 use crate::error::Error;
@@ -529,9 +529,7 @@ pub unsafe extern "C" fn softshell_lattice_copy_triangles(
         // SAFETY: the caller promises the buffer.
         unsafe {
             copy_out(3 * layout.triangle_count(), out, capacity, out_len, |dst| {
-                for (chunk, t) in dst.chunks_exact_mut(3).zip(layout.triangles()) {
-                    chunk.copy_from_slice(&t);
-                }
+                write_triples(dst, layout.triangles().iter().copied())
             })
         }
     })

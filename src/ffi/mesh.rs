@@ -4,6 +4,7 @@ use std::ffi::c_char;
 
 use super::boundary::{
     SoftshellStatus, arg_kind, arg_path, arg_ref, arg_slice, copy_out, out_arg, status_call, value_call, write_out,
+    write_triples,
 };
 use crate::error::{Error, Result};
 use crate::mesh::{CurvatureKind, MeshReport, Topology, TriMesh, VertexScalar, save_ply, vertex_curvature};
@@ -349,9 +350,7 @@ pub unsafe extern "C" fn softshell_mesh_copy_positions(
         // SAFETY: the caller promises the buffer.
         unsafe {
             copy_out(positions.len() * 3, out, capacity, out_len, |dst| {
-                for (chunk, p) in dst.chunks_exact_mut(3).zip(positions) {
-                    chunk.copy_from_slice(&p.to_array());
-                }
+                write_triples(dst, positions.iter().map(|p| p.to_array()))
             })
         }
     })
@@ -375,11 +374,7 @@ pub unsafe extern "C" fn softshell_mesh_copy_triangles(
         let triangles = mesh.mesh.triangles();
         // SAFETY: the caller promises the buffer.
         unsafe {
-            copy_out(triangles.len() * 3, out, capacity, out_len, |dst| {
-                for (chunk, t) in dst.chunks_exact_mut(3).zip(triangles) {
-                    chunk.copy_from_slice(t);
-                }
-            })
+            copy_out(triangles.len() * 3, out, capacity, out_len, |dst| write_triples(dst, triangles.iter().copied()))
         }
     })
 }

@@ -5,7 +5,7 @@ use super::boundary::{
     Poisonable, SoftshellStatus, arg_kind, arg_ref, arg_slice, handle_call, handle_read, out_arg, value_call,
 };
 #[cfg(feature = "shell")]
-use super::boundary::{copy_out, write_out};
+use super::boundary::{copy_out, write_out, write_triples};
 use super::mesh::SoftshellMesh;
 use crate::error::Error;
 #[cfg(feature = "shell")]
@@ -603,9 +603,7 @@ pub unsafe extern "C" fn softshell_shell_copy_positions(
             // SAFETY: the caller promises the buffer.
             unsafe {
                 copy_out(positions.len() * 3, out, capacity, out_len, |dst| {
-                    for (chunk, p) in dst.chunks_exact_mut(3).zip(positions) {
-                        chunk.copy_from_slice(&p.to_array());
-                    }
+                    write_triples(dst, positions.iter().map(|p| p.to_array()))
                 })
             }
         }
