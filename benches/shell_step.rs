@@ -5,7 +5,6 @@
 //! Anchor (issue 3): Bender's PositionBasedDynamics (FEM triangle + isometric bending, 5
 //! iterations, one thread) reaches about 26 million projections per second on this machine.
 
-use std::ffi::CString;
 use std::ptr::null_mut;
 use std::time::Instant;
 
@@ -13,31 +12,12 @@ use softshell::ffi::boundary::SoftshellStatus;
 use softshell::ffi::mesh::*;
 use softshell::ffi::shell::*;
 
+// The tests' OBJ reader and unit-diagonal scaling, shared rather than copied.
+#[path = "../tests/report_util/mod.rs"]
+mod report_util;
+
 fn unit_kitten() -> (*mut SoftshellMesh, usize, usize) {
-    let path = CString::new(format!("{}/data/kitten.obj", env!("CARGO_MANIFEST_DIR"))).unwrap();
-    let mut raw = null_mut();
-    let (mut pos, mut tri) = (Vec::new(), Vec::new());
-    let mut len = 0;
-    // SAFETY: NUL-terminated path; size queries, then buffers of the sizes asked for.
-    unsafe {
-        assert_eq!(softshell_mesh_load_obj(path.as_ptr(), &mut raw), SoftshellStatus::Ok);
-        softshell_mesh_copy_positions(raw, null_mut(), 0, &mut len);
-        pos.resize(len, 0.0f32);
-        softshell_mesh_copy_positions(raw, pos.as_mut_ptr(), len, &mut len);
-        softshell_mesh_copy_triangles(raw, null_mut(), 0, &mut len);
-        tri.resize(len, 0u32);
-        softshell_mesh_copy_triangles(raw, tri.as_mut_ptr(), len, &mut len);
-        softshell_mesh_free(raw);
-    }
-    let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
-    for p in pos.chunks(3) {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f32>().sqrt();
-    pos.iter_mut().enumerate().for_each(|(i, v)| *v = (*v - 0.5 * (lo[i % 3] + hi[i % 3])) / diag);
+    let (pos, tri) = report_util::unit_obj("kitten.obj", 1.0);
     let mut mesh = null_mut();
     // SAFETY: live slices with their lengths.
     let status =

@@ -11,6 +11,8 @@ use softshell::ffi::mesh::*;
 use softshell::ffi::shell::*;
 use softshell::ffi::version::softshell_last_error;
 
+mod report_util;
+
 fn last_error() -> String {
     // SAFETY: the library keeps the message alive until the next call on this thread.
     unsafe { CStr::from_ptr(softshell_last_error()) }.to_string_lossy().into_owned()
@@ -38,34 +40,7 @@ impl Drop for Shell {
 
 /// An OBJ of data/ scaled about its centre to a bounding-box diagonal of `scale`.
 fn unit_mesh(name: &str, scale: f32) -> Mesh {
-    let path = std::ffi::CString::new(format!("{}/data/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap();
-    let mut raw = null_mut();
-    let (mut pos, mut tri) = (Vec::new(), Vec::new());
-    let mut len = 0;
-    // SAFETY: NUL-terminated path; size queries, then buffers of the sizes asked for.
-    unsafe {
-        assert_eq!(softshell_mesh_load_obj(path.as_ptr(), &mut raw), SoftshellStatus::Ok, "{}", last_error());
-        softshell_mesh_copy_positions(raw, null_mut(), 0, &mut len);
-        pos.resize(len, 0.0f32);
-        softshell_mesh_copy_positions(raw, pos.as_mut_ptr(), len, &mut len);
-        softshell_mesh_copy_triangles(raw, null_mut(), 0, &mut len);
-        tri.resize(len, 0u32);
-        softshell_mesh_copy_triangles(raw, tri.as_mut_ptr(), len, &mut len);
-        softshell_mesh_free(raw);
-    }
-    let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
-    for p in pos.chunks(3) {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f32>().sqrt();
-    for p in pos.chunks_mut(3) {
-        for k in 0..3 {
-            p[k] = (p[k] - 0.5 * (lo[k] + hi[k])) / diag * scale;
-        }
-    }
+    let (pos, tri) = report_util::unit_obj(name, scale);
     let mut handle = null_mut();
     // SAFETY: live slices with their lengths.
     let status =

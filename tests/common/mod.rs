@@ -92,31 +92,6 @@ pub fn mesh_triangles(mesh: *const SoftshellMesh) -> Vec<u32> {
     out
 }
 
-/// Loads `data/<name>`, translates and scales it so that its bounding-box diagonal is 1 and its
-/// box is centred at the origin, and returns the new mesh (the loaded one is freed).
-pub fn unit_diagonal_mesh(name: &str) -> *mut SoftshellMesh {
-    let loaded = load_data_mesh(name);
-    let mut positions = mesh_positions(loaded);
-    let triangles = mesh_triangles(loaded);
-    // SAFETY: made by load_data_mesh.
-    unsafe { softshell_mesh_free(loaded) };
-    let mut min = [f32::INFINITY; 3];
-    let mut max = [f32::NEG_INFINITY; 3];
-    for p in positions.chunks_exact(3) {
-        for k in 0..3 {
-            min[k] = min[k].min(p[k]);
-            max[k] = max[k].max(p[k]);
-        }
-    }
-    let diagonal = ((0..3).map(|k| (max[k] - min[k]).powi(2)).sum::<f32>()).sqrt();
-    for p in positions.chunks_exact_mut(3) {
-        for k in 0..3 {
-            p[k] = (p[k] - 0.5 * (min[k] + max[k])) / diagonal;
-        }
-    }
-    mesh_from(&positions, &triangles).unwrap()
-}
-
 /// The version numbers written into include/softshell.h.
 pub fn header_version() -> (u32, u32, u32) {
     let header =
