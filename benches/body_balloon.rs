@@ -110,6 +110,14 @@ fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usiz
         }
         times.push(elapsed);
         iterations += stats.solver_iterations;
+        if std::env::var("TRACE").is_ok() && k % 10 == 0 {
+            eprintln!(
+                "step {k}: {} it, {:.2} ms, V/V0 {:.4}",
+                stats.solver_iterations,
+                elapsed * 1e3,
+                stats.volume / v0
+            );
+        }
         volumes.push(stats.volume / v0);
     }
     // SAFETY: made above, freed once.
@@ -219,10 +227,10 @@ fn main() {
         ("symplectic Euler, 40 subst., K_d 0.5", SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, 40, 2, 1.0 / 60.0),
         ("explicit Euler, 40 subst., K_d 0.5", SOFTSHELL_INTEGRATOR_EXPLICIT_EULER, 40, 2, 1.0 / 60.0),
     ];
-    // BODY_ONLY=implicit runs only the implicit Euler rows (for quick comparisons).
-    let only_implicit = std::env::var("BODY_ONLY").is_ok_and(|v| v == "implicit");
+    // BODY_ONLY=<text> runs only the rows whose name contains it (for quick comparisons).
+    let only = std::env::var("BODY_ONLY").ok();
     for (name, integrator, substeps, iterations, h) in configs {
-        if only_implicit && integrator != SOFTSHELL_INTEGRATOR_IMPLICIT_EULER {
+        if only.as_deref().is_some_and(|o| !name.contains(o)) {
             continue;
         }
         let mut d = base;
@@ -250,7 +258,7 @@ fn main() {
             }
         }
     }
-    if only_implicit {
+    if only.is_some() {
         return;
     }
     // Cost of a cracking step: springs break at 2 % strain beyond what the settled ball has.

@@ -87,6 +87,18 @@ impl WorkerPool {
         data.chunks_mut(chunk_len).enumerate().for_each(|(i, c)| f(i, c));
     }
 
+    /// Calls `f(task)` for every task, in parallel when the pool has workers. The tasks are made
+    /// by the caller (for example disjoint sub-slices of several arrays), so how the work is split
+    /// never depends on the thread count.
+    pub fn for_each_task<T: Send>(&self, tasks: &mut [T], f: impl Fn(&mut T) + Sync + Send) {
+        #[cfg(feature = "parallel")]
+        if self.pool.is_some() && tasks.len() > 1 {
+            use rayon::prelude::*;
+            return self.install(|| tasks.par_iter_mut().for_each(&f));
+        }
+        tasks.iter_mut().for_each(f);
+    }
+
     /// `(0..n).map(f).collect()`, in parallel when the pool has workers; the order of the result
     /// is always `0..n`.
     pub fn map_collect<R: Send>(&self, n: usize, f: impl Fn(usize) -> R + Sync + Send) -> Vec<R> {

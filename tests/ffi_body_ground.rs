@@ -63,3 +63,48 @@ fn ball_dropped_on_the_ground_stays_inflated_and_comes_to_rest_xpbd() {
     assert!(kinetic < 0.2, "the ball is still moving: {kinetic} J");
     assert!(center > 0.8 && center < 1.2, "centre at {center}");
 }
+
+/// A cloth lying flat on the ground under gravity tilted by 17 degrees (as on a slope with
+/// tan θ = 0.31): returns how far its centre moved along the slope in 2 s.
+fn sheet_on_a_slope(friction: f32) -> f64 {
+    let (mut positions, triangles) = cloth(9, 1.0);
+    for p in positions.chunks_exact_mut(3) {
+        // x-y sheet -> x-z sheet lying on the ground (y = 0).
+        let (x, y) = (p[0], p[1]);
+        p[0] = x;
+        p[1] = 0.0;
+        p[2] = -y;
+    }
+    let mut def = softshell_body_def_default();
+    def.integrator = SOFTSHELL_INTEGRATOR_IMPLICIT_EULER;
+    def.total_mass = 0.2;
+    def.spring_stiffness = 500.0;
+    def.spring_damping = 0.2;
+    def.ground = true;
+    def.ground_height = 0.0;
+    def.friction = friction;
+    let angle = 17f32.to_radians();
+    def.gravity = [9.81 * angle.sin(), -9.81 * angle.cos(), 0.0];
+    let body = body(&positions, &triangles, &def);
+    let mean_x = |b: &Body| {
+        let s = snapshot(b);
+        s.positions.chunks_exact(3).map(|p| p[0] as f64).sum::<f64>() / s.vertex_count() as f64
+    };
+    let start = mean_x(&body);
+    for _ in 0..120 {
+        step(&body);
+    }
+    let moved = mean_x(&body) - start;
+    println!("friction {friction}: the sheet moved {moved:.4} m down the slope in 2 s");
+    moved
+}
+
+#[test]
+fn static_friction_holds_a_sheet_on_a_slope_and_low_friction_lets_it_slide() {
+    // tan 17° = 0.31: friction 0.6 holds it (SPEC 2.3 Coulomb), 0.1 does not (it then accelerates
+    // at g (sin θ - 0.1 cos θ) = 1.9 m/s², about 3.8 m in 2 s).
+    let held = sheet_on_a_slope(0.6);
+    assert!(held.abs() < 0.01, "static friction did not hold the sheet: it moved {held} m");
+    let slid = sheet_on_a_slope(0.1);
+    assert!(slid > 2.5 && slid < 4.5, "a sheet with friction 0.1 should slide about 3.8 m, moved {slid} m");
+}

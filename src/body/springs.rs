@@ -86,14 +86,26 @@ pub(crate) fn spring_strain(xi: Vec3, xj: Vec3, rest: f32) -> f32 {
 /// The stiffness block `B = ∂f_i/∂x_j = a I + b u uᵀ` of a spring, returned as `(a, b, u)`:
 /// `a = K_s max(0, 1 - L0/|d|)`, `a + b = K_s` (the exact Hessian with its transverse part clamped
 /// at zero when compressed, so the implicit system stays positive definite).
+#[cfg(test)]
 pub(crate) fn spring_block(xi: Vec3, xj: Vec3, rest: f32, ks: f32) -> (f32, f32, Vec3) {
     let d = xj - xi;
     let len = d.length();
     if len <= MIN_LENGTH_RATIO * rest {
         return (0.0, 0.0, Vec3::ZERO);
     }
+    let (a, b) = spring_block_coefficients(len, rest, ks);
+    (a, b, d / len)
+}
+
+/// `(a, b)` of [`spring_block`] for a spring of length `len` (above the degenerate guard).
+pub(crate) fn spring_block_coefficients(len: f32, rest: f32, ks: f32) -> (f32, f32) {
     let a = ks * (1.0 - rest / len).max(0.0);
-    (a, ks - a, d / len)
+    (a, ks - a)
+}
+
+/// True when a spring of length `len` is too short to have a direction (no force, no block).
+pub(crate) fn is_degenerate(len: f32, rest: f32) -> bool {
+    len <= MIN_LENGTH_RATIO * rest
 }
 
 #[cfg(test)]
