@@ -130,7 +130,15 @@ mod tests {
             let pool = WorkerPool::new(threads).unwrap();
             let mut data: Vec<f32> = (0..1000).map(|i| i as f32).collect();
             pool.for_each_chunk_mut(&mut data, 64, |c, chunk| chunk.iter_mut().for_each(|x| *x = x.sqrt() + c as f32));
-            (data, pool.map_collect(100, |i| (i as f32).sin()))
+            // Tasks over disjoint sub-slices, each with its own partial sum, summed in task order.
+            let mut tasks: Vec<(usize, &mut [f32], f32)> =
+                data.chunks_mut(100).enumerate().map(|(c, chunk)| (c, chunk, 0.0)).collect();
+            pool.for_each_task(&mut tasks, |(c, chunk, sum)| {
+                chunk.iter_mut().for_each(|x| *x = (*x * 1.1).sin() + *c as f32);
+                *sum = chunk.iter().sum();
+            });
+            let total: f32 = tasks.iter().map(|t| t.2).sum();
+            (data, pool.map_collect(100, |i| (i as f32).sin()), total)
         };
         assert_eq!(run(1), run(2));
         assert_eq!(run(1), run(4));

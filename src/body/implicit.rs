@@ -115,8 +115,9 @@ const CG_RELATIVE_TOLERANCE: f64 = 3e-3;
 
 /// ... or below this fraction of the size of the forces themselves (`h Σ|f|` per vertex): near
 /// equilibrium the net force is a small difference of large spring and gas forces, and a test
-/// relative to the right side alone would ask for more digits than the f32 forces have.
-const CG_FORCE_TOLERANCE: f64 = 1e-5;
+/// relative to the right side alone would ask for more digits than the f32 forces have (1e-5 kept
+/// the settled zero-gravity balloon iterating 10-30 times a step on that noise).
+const CG_FORCE_TOLERANCE: f64 = 1e-4;
 
 /// Vertices per parallel chunk (fixed, so the result does not depend on the thread count).
 const CHUNK: usize = 1024;
