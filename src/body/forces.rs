@@ -48,8 +48,7 @@ pub(crate) fn add_spring_forces(model: &Model, x: &[Vec3], v: &[Vec3], f: &mut [
 /// Gas pressure forces `P_f ∂V_f/∂x_i` added to `f` (SPEC 2.1 eq. 8-9); measures the gas at `x`
 /// and leaves `∂V/∂x` in `gradient`.
 pub(crate) fn add_gas_forces(model: &Model, gas: &mut Gas, x: &[Vec3], gradient: &mut [Vec3], f: &mut [Vec3]) {
-    gas.measure(x, model.triangles, model.face_fragment);
-    gas.volume_gradient(x, model.triangles, model.face_fragment, gradient);
+    gas.measure_with_gradient(x, model.triangles, model.face_fragment, gradient);
     for (i, g) in gradient.iter().enumerate() {
         let frag = gas.vertex_fragment[i];
         if frag != u32::MAX {

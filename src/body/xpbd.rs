@@ -95,8 +95,7 @@ pub(crate) fn substep(
     let gamma = if ks > 0.0 { kd / (ks * h) } else { 0.0 };
     for _ in 0..iterations.max(1) {
         if let Some(gas) = gas.as_deref_mut() {
-            gas.measure(x, model.triangles, model.face_fragment);
-            gas.volume_gradient(x, model.triangles, model.face_fragment, &mut s.gradient);
+            gas.measure_with_gradient(x, model.triangles, model.face_fragment, &mut s.gradient);
             s.gas_norm.fill(0.0);
             for (i, g) in s.gradient.iter().enumerate() {
                 let f = gas.vertex_fragment[i];
