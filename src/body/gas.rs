@@ -185,6 +185,7 @@ impl Gas {
     /// Writes `∂V_f/∂x_i` into `out[i]` for every vertex i (f its fragment; 0 for vertices of
     /// fragments without gas). Exact for the capped volume (SPEC 2.1: `= (1/3) Σ A_f n_f` on a
     /// closed mesh).
+    #[cfg(test)]
     pub fn volume_gradient(&self, x: &[Vec3], triangles: &[[u32; 3]], face_fragment: &[u32], out: &mut [Vec3]) {
         out.iter_mut().for_each(|g| *g = Vec3::ZERO);
         let origin = |f: usize| {

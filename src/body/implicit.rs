@@ -35,14 +35,10 @@ struct Coupling {
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum ContactFilter {
     Free,
-    /// Sliding: `(v + Δv)·n = 0` only, with the normal speed the contact takes away (≥ 0, per
-    /// unit mass the normal impulse): kinetic friction takes up to `friction` times it off the
-    /// tangential speed after the solve.
+    /// `(v + Δv)·n = 0`, with the normal speed the contact takes away (≥ 0, per unit mass the
+    /// normal impulse): Coulomb friction takes up to `friction` times it off the tangential speed
+    /// after the solve, which also holds a body at rest on a slope inside the friction cone.
     Slide(Vec3, f32),
-    /// Held by static friction (the force that would move it along the surface is inside the
-    /// friction cone): `v + Δv = 0`. Without it a ball resting on the ground creeps a little
-    /// every step and the solve never starts from equilibrium.
-    Stick,
 }
 
 impl ContactFilter {
@@ -53,7 +49,6 @@ impl ContactFilter {
                 let n = Vec3A::from(n);
                 value - n * value.dot(n)
             }
-            ContactFilter::Stick => Vec3A::ZERO,
         }
     }
 }
@@ -87,6 +82,21 @@ pub(crate) struct ImplicitScratch {
 }
 
 impl ImplicitScratch {
+    /// Keeps the warm start across a topology change: survivors keep their index, and a vertex
+    /// appended by a split starts from the Δv of the input vertex it was copied from (`origin`);
+    /// without this every crack would restart the solve from the free-fall guess.
+    pub fn extend_warm_start(&mut self, origin: &[u32]) {
+        let old = self.previous_dv.len();
+        if old == 0 || origin.len() < old {
+            return;
+        }
+        for k in old..origin.len() {
+            let from = origin[k] as usize;
+            let guess = if from < old { self.previous_dv[from] } else { Vec3A::ZERO };
+            self.previous_dv.push(guess);
+        }
+    }
+
     pub fn memory_bytes(&self) -> usize {
         (self.force.capacity() + self.gradient.capacity()) * 12
             + (self.rhs.capacity()
@@ -393,31 +403,26 @@ pub(crate) fn substep(
         s.dv[i] = if model.inv_mass[i] == 0.0 { Vec3A::ZERO } else { s.previous_dv[i] };
     }
     // Contacts inside the solve (Baraff and Witkin 1998, modified PCG): a vertex resting on an
-    // obstacle, moving and pushed into it, gets the constraint (v + Δv)·n = 0, or v + Δv = 0 when
-    // static friction holds it (SPEC 2.3: the tangential push `|Δv_t|` it would get alone is at
-    // most `friction` times the normal one). Restitution and sliding friction follow after the
-    // solve, with the other integrators' contact response.
+    // obstacle, moving and pushed into it, gets the constraint (v + Δv)·n = 0. Coulomb friction
+    // (SPEC 2.3) follows the solve, bounded by the normal speed the contact took away; restitution
+    // with the other integrators' contact response.
     s.contact.clear();
     if !obstacles.is_empty() {
         let mut any_contact = false;
         s.contact.resize(n, ContactFilter::Free);
-        let friction = model.settings.friction;
         for i in 0..n {
             if model.inv_mass[i] > 0.0 {
                 if let Some(normal) = touching(x[i], obstacles, 1e-6) {
                     // Released when moving away or pulled away (the contact cannot pull).
                     if v[i].dot(normal) <= 0.0 && Vec3::from(s.rhs[i]).dot(normal) <= 0.0 {
                         any_contact = true;
+                        // The normal speed the contact takes away (per unit mass the normal
+                        // impulse), to first order: what sliding friction may take off.
                         let alone = v[i] + Vec3::from(s.rhs[i]) * model.inv_mass[i];
-                        let along = alone.dot(normal);
-                        if (alone - normal * along).length() <= friction * -along {
-                            s.contact[i] = ContactFilter::Stick;
-                            s.dv[i] = -Vec3A::from(v[i]);
-                        } else {
-                            s.contact[i] = ContactFilter::Slide(normal, -along);
-                            let dv = Vec3::from(s.dv[i]);
-                            s.dv[i] = (dv - normal * (dv.dot(normal) + v[i].dot(normal))).into();
-                        }
+                        let pushed = -alone.dot(normal);
+                        s.contact[i] = ContactFilter::Slide(normal, pushed.max(0.0));
+                        let dv = Vec3::from(s.dv[i]);
+                        s.dv[i] = (dv - normal * (dv.dot(normal) + v[i].dot(normal))).into();
                     }
                 }
             }

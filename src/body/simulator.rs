@@ -634,6 +634,9 @@ impl Body {
             }
         }
         self.rebuild(&old_face_fragment);
+        if let (Scratch::Implicit(s), Some(fracture)) = (&mut self.scratch, self.fracture.as_ref()) {
+            s.extend_warm_start(&fracture.origin);
+        }
         released
     }
 
