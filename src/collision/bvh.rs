@@ -29,6 +29,13 @@ impl Aabb {
                 b.max[axis] = b.max[axis].max(x);
             }
         }
+        b.grown(margin)
+    }
+
+    /// This box grown by `margin` plus a few units in the last place of each coordinate, so that
+    /// rounding can never make it smaller than the exact grown box.
+    pub fn grown(&self, margin: f64) -> Aabb {
+        let mut b = *self;
         for axis in 0..3 {
             // The slack (4 eps of |coordinate| + margin) covers the two roundings below.
             let grow = |x: f64| margin + (x.abs() + margin) * (4.0 * f64::EPSILON);
@@ -36,6 +43,12 @@ impl Aabb {
             b.max[axis] += grow(b.max[axis]);
         }
         b
+    }
+
+    /// Whether the closed box holds the point (exact comparisons; false for NaN).
+    #[inline]
+    pub fn contains(&self, p: &V3) -> bool {
+        (0..3).all(|k| self.min[k] <= p[k] && p[k] <= self.max[k])
     }
 
     /// The smallest box holding both.

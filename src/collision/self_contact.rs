@@ -1,6 +1,8 @@
-//! Self-contact of a closed triangle mesh moving over one step (SPEC 1.6): swept-box BVHs of
-//! vertices, edges and faces refit every step (rebuilt when loose), candidate vertex-face and
-//! edge-edge pairs that share no vertex, the filters and the exact conservative CCD of
+//! Self-contact of a closed triangle mesh moving over one step (SPEC 1.6): candidate vertex-face
+//! and edge-edge pairs that share no vertex, kept across steps in a cache (a Verlet list) filled
+//! from BVHs of vertices, edges and faces over boxes grown by a reach margin, refit (rebuilt when
+//! loose) only when a vertex leaves its reach; each step the pairs' swept boxes, the filters and
+//! the exact conservative CCD of
 //! [`super::ccd`], then the contact constraints `C_vf >= 0`, `C_ee >= 0` projected on the end
 //! positions, with the side taken from the start of the step.
 //!
@@ -12,7 +14,8 @@
 //!
 //! Knows nothing of the simulator that moves the mesh (positions, inverse masses in; corrected
 //! positions and velocities out). Runs serially in a fixed order: results do not depend on
-//! threads. Allocates only when a step has more contacts than the last largest one.
+//! threads. Allocates only when a step has more contacts, or the cache more pairs, than the
+//! largest before.
 
 // NaN must fail every guard below, so comparisons are written `!(x > limit)` on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
@@ -21,7 +24,7 @@ use glam::{DVec3, Vec3};
 
 use super::bvh::{Aabb, Bvh};
 use super::ccd::{CcdSettings, Stage, edge_edge_with, vertex_triangle_with};
-use super::filters::V3;
+use super::filters::{V3, swept_aabbs_separated};
 use super::hull_filter::{edge_edge_hulls_separated, vertex_triangle_hulls_separated};
 
 /// Projection rounds (projection, then re-check of the moved pairs) before the fail-safe.
@@ -52,6 +55,8 @@ pub struct ContactCounts {
     pub reverted: u64,
     /// BVH rebuilds.
     pub rebuilds: u64,
+    /// Refills of the cached candidate pairs (see `SelfContact::ensure_pairs`).
+    pub pair_refills: u64,
     /// Rounds run (1 = no contact needed a re-check).
     pub rounds: u64,
 }
@@ -65,6 +70,7 @@ impl ContactCounts {
         self.contacts += other.contacts;
         self.reverted += other.reverted;
         self.rebuilds += other.rebuilds;
+        self.pair_refills += other.pair_refills;
         self.rounds += other.rounds;
     }
 }
@@ -93,6 +99,17 @@ pub struct SelfContact {
     vertex_boxes: Vec<Aabb>,
     edge_boxes: Vec<Aabb>,
     face_boxes: Vec<Aabb>,
+    /// Per vertex: the box its positions must stay in for the cached pairs to hold (see
+    /// [`SelfContact::ensure_pairs`]).
+    reach: Vec<Aabb>,
+    /// Cached (vertex, face) pairs sharing no vertex whose reach boxes come within
+    /// `pairs_thickness`: a superset of the pairs whose swept boxes do, while every vertex stays
+    /// in its reach.
+    vf_pairs: Vec<(u32, u32)>,
+    /// Cached (edge, edge) pairs, first index smaller, likewise.
+    ee_pairs: Vec<(u32, u32)>,
+    /// The thickness the cached pairs were found for; NaN when there are none.
+    pairs_thickness: f64,
     /// Per vertex: bit 0 = moved by the last projection round, bit 1 = put back by the fail-safe.
     flags: Vec<u8>,
     contacts: Vec<Contact>,
@@ -100,6 +117,12 @@ pub struct SelfContact {
     hits: Vec<(u8, u32, u32, f64)>,
     settings: CcdSettings,
 }
+
+/// Reach margin of a vertex: this many times its own displacement in the step that refills the
+/// cached pairs, plus [`REACH_SHARED`] times the largest displacement (and the thickness).
+const REACH_OWN: f64 = 2.0;
+/// See [`REACH_OWN`]: a vertex at rest in that step may start moving.
+const REACH_SHARED: f64 = 0.5;
 
 const MOVED: u8 = 1;
 const REVERTED: u8 = 2;
@@ -226,6 +249,11 @@ impl SelfContact {
             vertex_boxes,
             edge_boxes,
             face_boxes,
+            reach: vec![Aabb::EMPTY; x.len()],
+            // Enough for the pairs of a mesh at rest (the first step) without reallocation.
+            vf_pairs: Vec::with_capacity(x.len() + 64),
+            ee_pairs: Vec::with_capacity(edges.len() + 64),
+            pairs_thickness: f64::NAN,
             flags: vec![0; x.len()],
             contacts: Vec::with_capacity(reserve),
             hits: Vec::with_capacity(reserve),
@@ -260,20 +288,79 @@ impl SelfContact {
             + b(&self.vertex_boxes)
             + b(&self.edge_boxes)
             + b(&self.face_boxes)
+            + b(&self.reach)
+            + b(&self.vf_pairs)
+            + b(&self.ee_pairs)
             + b(&self.flags)
             + b(&self.contacts)
             + b(&self.hits)
     }
 
-    fn refit(&mut self, x0: &[Vec3], x1: &[Vec3], half: f64) -> u64 {
-        for (v, b) in self.vertex_boxes.iter_mut().enumerate() {
-            *b = Aabb::around(&[d(x0[v]), d(x1[v])], half);
+    /// Makes sure the cached pairs hold every pair whose swept boxes over `x0 -> x1` come within
+    /// `thickness` (a Verlet list, as in molecular dynamics): they do while every vertex's
+    /// positions at both ends stay in its reach box and `thickness` is at most the one they were
+    /// found for. Then a primitive's swept box lies in the union of its vertices' reach boxes,
+    /// so two swept boxes within `thickness` imply reach unions within it, and the traversal
+    /// that filled the cache collected the pair. Otherwise the reach boxes are set anew (the box
+    /// of the vertex's two positions grown by a margin: a few times its own displacement plus a
+    /// share of the largest one, so that steady motion keeps the cache for several steps), the
+    /// trees are refit (or rebuilt) over the reach unions, and the cache is refilled. Returns
+    /// the number of trees rebuilt, or None when the cache still held.
+    fn ensure_pairs(&mut self, x0: &[Vec3], x1: &[Vec3], thickness: f64) -> Option<u64> {
+        let held = thickness <= self.pairs_thickness
+            && self.reach.iter().enumerate().all(|(v, r)| r.contains(&d(x0[v])) && r.contains(&d(x1[v])));
+        if held {
+            return None;
         }
-        fill_boxes(x0, x1, &self.edges, half, &mut self.edge_boxes);
-        fill_boxes(x0, x1, &self.triangles, half, &mut self.face_boxes);
-        u64::from(self.vertex_tree.update(&self.vertex_boxes))
+        let motion = |v: usize| (x1[v] - x0[v]).abs().max_element() as f64;
+        let largest = (0..x0.len()).map(motion).fold(0.0, f64::max);
+        for v in 0..x0.len() {
+            let margin = REACH_OWN * motion(v) + REACH_SHARED * largest + thickness;
+            self.reach[v] = Aabb::around(&[d(x0[v]), d(x1[v])], margin);
+        }
+        let half = 0.5 * thickness;
+        let reach = &self.reach;
+        let union = |prim: &[u32]| prim.iter().fold(Aabb::EMPTY, |acc, &v| acc.union(&reach[v as usize])).grown(half);
+        for (v, b) in self.vertex_boxes.iter_mut().enumerate() {
+            *b = union(&[v as u32]);
+        }
+        for (e, b) in self.edges.iter().zip(self.edge_boxes.iter_mut()) {
+            *b = union(e);
+        }
+        for (t, b) in self.triangles.iter().zip(self.face_boxes.iter_mut()) {
+            *b = union(t);
+        }
+        let rebuilt = u64::from(self.vertex_tree.update(&self.vertex_boxes))
             + u64::from(self.edge_tree.update(&self.edge_boxes))
-            + u64::from(self.face_tree.update(&self.face_boxes))
+            + u64::from(self.face_tree.update(&self.face_boxes));
+        let (tris, edges) = (&self.triangles, &self.edges);
+        let (vf, ee) = (&mut self.vf_pairs, &mut self.ee_pairs);
+        vf.clear();
+        ee.clear();
+        self.vertex_tree.for_each_overlap(&self.face_tree, |v, f| {
+            if !tris[f as usize].contains(&v) {
+                vf.push((v, f));
+            }
+        });
+        self.edge_tree.for_each_self_overlap(|i, j| {
+            let ([a, b], [c, e]) = (edges[i as usize], edges[j as usize]);
+            if a != c && a != e && b != c && b != e {
+                ee.push((i, j));
+            }
+        });
+        self.pairs_thickness = thickness;
+        Some(rebuilt)
+    }
+
+    /// [`SelfContact::ensure_pairs`], counting cache refills; returns the tree rebuilds.
+    fn ensure_pairs_counted(&mut self, x0: &[Vec3], x1: &[Vec3], thickness: f64, counts: &mut ContactCounts) -> u64 {
+        match self.ensure_pairs(x0, x1, thickness) {
+            Some(rebuilt) => {
+                counts.pair_refills += 1;
+                rebuilt
+            }
+            None => 0,
+        }
     }
 
     /// Finds the pairs that may come within `thickness` over `x0 -> x1` into `self.hits`.
@@ -313,6 +400,14 @@ impl SelfContact {
                 }
                 let start = [d(x0[v as usize]), d(x0[t[0] as usize]), d(x0[t[1] as usize]), d(x0[t[2] as usize])];
                 let end = [d(x1[v as usize]), d(x1[t[0] as usize]), d(x1[t[1] as usize]), d(x1[t[2] as usize])];
+                // The cached pairs are a superset: the swept boxes decide who is a candidate.
+                if swept_aabbs_separated(
+                    &[start[0], end[0]],
+                    &[start[1], start[2], start[3], end[1], end[2], end[3]],
+                    thickness,
+                ) {
+                    return;
+                }
                 if vertex_triangle_hulls_separated(&start, &end, thickness) {
                     tally(None);
                     return;
@@ -330,6 +425,13 @@ impl SelfContact {
                 }
                 let start = [d(x0[a as usize]), d(x0[b as usize]), d(x0[c as usize]), d(x0[e as usize])];
                 let end = [d(x1[a as usize]), d(x1[b as usize]), d(x1[c as usize]), d(x1[e as usize])];
+                if swept_aabbs_separated(
+                    &[start[0], start[1], end[0], end[1]],
+                    &[start[2], start[3], end[2], end[3]],
+                    thickness,
+                ) {
+                    return;
+                }
                 if edge_edge_hulls_separated(&start, &end, thickness) {
                     tally(None);
                     return;
@@ -341,21 +443,11 @@ impl SelfContact {
                 }
             }
         };
-        if !only_moved {
-            self.vertex_tree.for_each_overlap(&self.face_tree, |v, f| test(0, v, f));
-            self.edge_tree.for_each_self_overlap(|i, j| test(1, i, j));
-        } else {
-            // Only primitives with a moved vertex: small trees over them, queried against the
-            // full ones (a pair of two moved primitives may come twice: deduplicated below).
-            let moved = |v: u32| flags[v as usize] & MOVED != 0;
-            let mv: Vec<u32> = (0..flags.len() as u32).filter(|&v| moved(v)).collect();
-            let mf: Vec<u32> = (0..tris.len() as u32).filter(|&f| tris[f as usize].iter().any(|&v| moved(v))).collect();
-            let me: Vec<u32> =
-                (0..edges.len() as u32).filter(|&e| edges[e as usize].iter().any(|&v| moved(v))).collect();
-            let subset = |ids: &[u32], boxes: &[Aabb]| Bvh::build(ids.iter().map(|&i| boxes[i as usize]).collect());
-            subset(&mv, &self.vertex_boxes).for_each_overlap(&self.face_tree, |k, f| test(0, mv[k as usize], f));
-            self.vertex_tree.for_each_overlap(&subset(&mf, &self.face_boxes), |v, k| test(0, v, mf[k as usize]));
-            subset(&me, &self.edge_boxes).for_each_overlap(&self.edge_tree, |k, j| test(1, me[k as usize], j));
+        for &(v, f) in &self.vf_pairs {
+            test(0, v, f);
+        }
+        for &(i, j) in &self.ee_pairs {
+            test(1, i, j);
         }
         // The traversal order is fixed, but sort anyway so the projection order is the pairs'.
         self.hits.sort_unstable_by(|x, y| (x.0, x.1, x.2).cmp(&(y.0, y.1, y.2)));
@@ -424,12 +516,12 @@ impl SelfContact {
         let mut counts = ContactCounts::default();
         self.contacts.clear();
         self.flags.fill(0);
-        counts.rebuilds += self.refit(x0, p, 0.5 * thickness);
+        counts.rebuilds += self.ensure_pairs_counted(x0, p, thickness, &mut counts);
         for round in 0..ROUNDS {
             counts.rounds += 1;
             let check = if round == 0 { thickness } else { RECHECK_FRACTION * thickness };
             if round > 0 {
-                counts.rebuilds += self.refit(x0, p, 0.5 * check);
+                counts.rebuilds += self.ensure_pairs_counted(x0, p, check, &mut counts);
             }
             self.detect(x0, p, check, round > 0, &mut counts);
             if self.hits.is_empty() {
@@ -459,7 +551,7 @@ impl SelfContact {
         // a vertex newly put back, are tested.
         loop {
             counts.rounds += 1;
-            counts.rebuilds += self.refit(x0, p, 0.0);
+            counts.rebuilds += self.ensure_pairs_counted(x0, p, 0.0, &mut counts);
             self.detect(x0, p, 0.0, true, &mut ContactCounts::default());
             for f in &mut self.flags {
                 *f &= REVERTED;
