@@ -109,6 +109,12 @@ pub struct SelfContact {
     ee_pairs: Vec<(u32, u32)>,
     /// The thickness the cached pairs were found for; NaN when there are none.
     pairs_thickness: f64,
+    /// Vertices that left their reach (scratch of [`SelfContact::ensure_pairs`]).
+    escaped: Vec<u32>,
+    /// Per vertex, edge, face: touched by an escaped vertex (scratch, all false between calls).
+    dirty_vertex: Vec<bool>,
+    dirty_edge: Vec<bool>,
+    dirty_face: Vec<bool>,
     /// Per vertex: bit 0 = moved by the last projection round, bit 1 = put back by the fail-safe.
     flags: Vec<u8>,
     contacts: Vec<Contact>,
@@ -119,9 +125,11 @@ pub struct SelfContact {
 
 /// Reach margin of a vertex: this many times its own displacement in the step that refills the
 /// cached pairs, plus [`REACH_SHARED`] times the largest displacement (and the thickness).
-const REACH_OWN: f64 = 2.0;
+const REACH_OWN: f64 = 1.0;
 /// See [`REACH_OWN`]: a vertex at rest in that step may start moving.
-const REACH_SHARED: f64 = 0.5;
+const REACH_SHARED: f64 = 0.25;
+/// When at most 1/this of the vertices left their reach, only their pairs are found again.
+const PARTIAL_REFILL_SHARE: usize = 3;
 
 /// See [`CcdSettings::certain_contact_slack`]: pairs sampled within 1.75 thicknesses are contacts
 /// without a search. In a crushed shell thousands of pairs rest about the thickness apart, and
@@ -258,6 +266,10 @@ impl SelfContact {
             vf_pairs: Vec::with_capacity(x.len() + 64),
             ee_pairs: Vec::with_capacity(edges.len() + 64),
             pairs_thickness: f64::NAN,
+            escaped: Vec::with_capacity(x.len()),
+            dirty_vertex: vec![false; x.len()],
+            dirty_edge: vec![false; edges.len()],
+            dirty_face: vec![false; triangles.len()],
             flags: vec![0; x.len()],
             contacts: Vec::with_capacity(reserve),
             hits: Vec::with_capacity(reserve),
@@ -290,6 +302,10 @@ impl SelfContact {
             + b(&self.reach)
             + b(&self.vf_pairs)
             + b(&self.ee_pairs)
+            + b(&self.escaped)
+            + b(&self.dirty_vertex)
+            + b(&self.dirty_edge)
+            + b(&self.dirty_face)
             + b(&self.flags)
             + b(&self.contacts)
             + b(&self.hits)
@@ -300,20 +316,29 @@ impl SelfContact {
     /// positions at both ends stay in its reach box and `thickness` is at most the one they were
     /// found for. Then a primitive's swept box lies in the union of its vertices' reach boxes,
     /// so two swept boxes within `thickness` imply reach unions within it, and the traversal
-    /// that filled the cache collected the pair. Otherwise the reach boxes are set anew (the box
-    /// of the vertex's two positions grown by a margin: a few times its own displacement plus a
-    /// share of the largest one, so that steady motion keeps the cache for several steps), the
-    /// trees are refit (or rebuilt) over the reach unions, and the cache is refilled. Returns
-    /// the number of trees rebuilt, or None when the cache still held.
+    /// that filled the cache collected the pair. Otherwise the reach boxes of the vertices that
+    /// left are set anew (the box of the vertex's two positions grown by a margin: a few times
+    /// its own displacement plus a share of the largest one, so that steady motion keeps the
+    /// cache for several steps), and only their pairs are found again
+    /// ([`SelfContact::refill_escaped`]); when many left, or the thickness grew, every reach box
+    /// is set anew, the trees are refit (or rebuilt) over the reach unions and the cache is
+    /// refilled. Returns the number of trees rebuilt, or None when the cache still held.
     fn ensure_pairs(&mut self, x0: &[Vec3], x1: &[Vec3], thickness: f64) -> Option<u64> {
-        let held = thickness <= self.pairs_thickness
-            && self.reach.iter().enumerate().all(|(v, r)| r.contains(&d(x0[v])) && r.contains(&d(x1[v])));
-        if held {
-            return None;
-        }
+        let n = x0.len();
         let motion = |v: usize| (x1[v] - x0[v]).abs().max_element() as f64;
-        let largest = (0..x0.len()).map(motion).fold(0.0, f64::max);
-        for v in 0..x0.len() {
+        let outside = |r: &Aabb, v: usize| !(r.contains(&d(x0[v])) && r.contains(&d(x1[v])));
+        if thickness <= self.pairs_thickness {
+            self.escaped.clear();
+            self.escaped.extend((0..n as u32).filter(|&v| outside(&self.reach[v as usize], v as usize)));
+            if self.escaped.is_empty() {
+                return None;
+            }
+            if self.escaped.len() * PARTIAL_REFILL_SHARE <= n {
+                return Some(self.refill_escaped(x0, x1));
+            }
+        }
+        let largest = (0..n).map(motion).fold(0.0, f64::max);
+        for v in 0..n {
             let margin = REACH_OWN * motion(v) + REACH_SHARED * largest + thickness;
             self.reach[v] = Aabb::around(&[d(x0[v]), d(x1[v])], margin);
         }
@@ -349,6 +374,86 @@ impl SelfContact {
         });
         self.pairs_thickness = thickness;
         Some(rebuilt)
+    }
+
+    /// The partial refill of [`SelfContact::ensure_pairs`] when few vertices (`self.escaped`)
+    /// left their reach: new reach boxes for them, new boxes for the primitives they belong to,
+    /// the trees refit, the cached pairs of those primitives dropped and found again by querying
+    /// small trees over them against the full ones. The cache then equals what a full refill
+    /// with these reach boxes would hold. Returns the number of trees rebuilt.
+    fn refill_escaped(&mut self, x0: &[Vec3], x1: &[Vec3]) -> u64 {
+        let motion = |v: usize| (x1[v] - x0[v]).abs().max_element() as f64;
+        let largest = (0..x0.len()).map(motion).fold(0.0, f64::max);
+        let thickness = self.pairs_thickness;
+        let half = 0.5 * thickness;
+        for &v in &self.escaped {
+            let v = v as usize;
+            let margin = REACH_OWN * motion(v) + REACH_SHARED * largest + thickness;
+            self.reach[v] = Aabb::around(&[d(x0[v]), d(x1[v])], margin);
+            self.dirty_vertex[v] = true;
+        }
+        let (reach, dirty) = (&self.reach, &self.dirty_vertex);
+        let union = |prim: &[u32]| prim.iter().fold(Aabb::EMPTY, |acc, &v| acc.union(&reach[v as usize])).grown(half);
+        let touched = |prim: &[u32]| prim.iter().any(|&v| dirty[v as usize]);
+        let (mut mv, mut me, mut mf) = (Vec::new(), Vec::new(), Vec::new());
+        for &v in &self.escaped {
+            self.vertex_boxes[v as usize] = union(&[v]);
+            mv.push(v);
+        }
+        for (e, prim) in self.edges.iter().enumerate() {
+            if touched(prim) {
+                self.edge_boxes[e] = union(prim);
+                self.dirty_edge[e] = true;
+                me.push(e as u32);
+            }
+        }
+        for (f, prim) in self.triangles.iter().enumerate() {
+            if touched(prim) {
+                self.face_boxes[f] = union(prim);
+                self.dirty_face[f] = true;
+                mf.push(f as u32);
+            }
+        }
+        let rebuilt = u64::from(self.vertex_tree.update(&self.vertex_boxes))
+            + u64::from(self.edge_tree.update(&self.edge_boxes))
+            + u64::from(self.face_tree.update(&self.face_boxes));
+        let (dv, de, df) = (&self.dirty_vertex, &self.dirty_edge, &self.dirty_face);
+        self.vf_pairs.retain(|&(v, f)| !dv[v as usize] && !df[f as usize]);
+        self.ee_pairs.retain(|&(i, j)| !de[i as usize] && !de[j as usize]);
+        let (tris, edges) = (&self.triangles, &self.edges);
+        let (vf, ee) = (&mut self.vf_pairs, &mut self.ee_pairs);
+        let subset = |ids: &[u32], boxes: &[Aabb]| Bvh::build(ids.iter().map(|&i| boxes[i as usize]).collect());
+        // Escaped vertices against every face; every other vertex against the touched faces.
+        subset(&mv, &self.vertex_boxes).for_each_overlap(&self.face_tree, |k, f| {
+            let v = mv[k as usize];
+            if !tris[f as usize].contains(&v) {
+                vf.push((v, f));
+            }
+        });
+        self.vertex_tree.for_each_overlap(&subset(&mf, &self.face_boxes), |v, k| {
+            let f = mf[k as usize];
+            if !dv[v as usize] && !tris[f as usize].contains(&v) {
+                vf.push((v, f));
+            }
+        });
+        // Touched edges against every edge; a pair of two touched edges once.
+        subset(&me, &self.edge_boxes).for_each_overlap(&self.edge_tree, |k, j| {
+            let i = me[k as usize];
+            let ([a, b], [c, e]) = (edges[i as usize], edges[j as usize]);
+            if (!de[j as usize] || i < j) && a != c && a != e && b != c && b != e {
+                ee.push((i.min(j), i.max(j)));
+            }
+        });
+        for &v in &self.escaped {
+            self.dirty_vertex[v as usize] = false;
+        }
+        for &e in &me {
+            self.dirty_edge[e as usize] = false;
+        }
+        for &f in &mf {
+            self.dirty_face[f as usize] = false;
+        }
+        rebuilt
     }
 
     /// [`SelfContact::ensure_pairs`], counting cache refills; returns the tree rebuilds.
@@ -694,6 +799,83 @@ mod tests {
         for i in 4..8 {
             assert!(v[i].z <= 1e-4, "{:?}", v[i]);
         }
+    }
+
+    #[test]
+    fn cached_pairs_hold_every_pair_whose_swept_boxes_meet() {
+        // A crumpled 10 x 10 sheet moved randomly, with motions that grow and shrink so that
+        // vertices leave their reach one by one (partial refills) and all at once (full ones).
+        let mut seed = 0x1234_5678_9ABC_DEF0u64;
+        let mut unit = move || {
+            seed ^= seed >> 12;
+            seed ^= seed << 25;
+            seed ^= seed >> 27;
+            (seed.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        let n = 10;
+        let mut x: Vec<Vec3> = (0..n * n)
+            .map(|k| Vec3::new((k % n) as f32 / n as f32, (k / n) as f32 / n as f32, 0.02 * unit()))
+            .collect();
+        let mut tris = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let v = (j * n + i) as u32;
+                let n = n as u32;
+                tris.extend([[v, v + 1, v + n + 1], [v, v + n + 1, v + n]]);
+            }
+        }
+        let edges = crate::mesh::Topology::build(&tris, x.len()).edges;
+        let mut sc = SelfContact::new(&x, &edges, &tris);
+        let thickness = 0.01;
+        let (mut partial, mut full) = (0, 0);
+        for step in 0..60 {
+            let amount = [0.002, 0.02, 0.005, 0.05][step % 4] * if step % 7 == 0 { 3.0 } else { 1.0 };
+            let few = step % 3 == 1;
+            let x1: Vec<Vec3> = x
+                .iter()
+                .enumerate()
+                .map(|(v, &p)| {
+                    let s = if few && v % 17 != 0 { 0.01 } else { 1.0 };
+                    p + Vec3::new(unit(), unit(), unit()) * amount * s
+                })
+                .collect();
+            if sc.ensure_pairs(&x, &x1, thickness).is_some() {
+                if sc.escaped.len() * PARTIAL_REFILL_SHARE <= x.len() && sc.escaped.len() > 0 && step > 0 {
+                    partial += 1;
+                } else {
+                    full += 1;
+                }
+            }
+            let boxes = |prim: &[u32]| {
+                let pts: Vec<V3> = prim.iter().flat_map(|&v| [d(x[v as usize]), d(x1[v as usize])]).collect();
+                Aabb::around(&pts, 0.5 * thickness)
+            };
+            let (mut vf, mut ee) = (sc.vf_pairs.clone(), sc.ee_pairs.clone());
+            vf.sort_unstable();
+            ee.sort_unstable();
+            for v in 0..x.len() as u32 {
+                for (f, t) in tris.iter().enumerate() {
+                    if !t.contains(&v) && boxes(&[v]).overlaps(&boxes(t)) {
+                        assert!(vf.binary_search(&(v, f as u32)).is_ok(), "step {step}: ({v}, {f}) missing");
+                    }
+                }
+            }
+            for i in 0..edges.len() {
+                for j in i + 1..edges.len() {
+                    let ([a, b], [c, e]) = (edges[i], edges[j]);
+                    if a != c && a != e && b != c && b != e && boxes(&edges[i]).overlaps(&boxes(&edges[j])) {
+                        assert!(ee.binary_search(&(i as u32, j as u32)).is_ok(), "step {step}: edges {i}, {j} missing");
+                    }
+                }
+            }
+            // No pair twice.
+            let (l1, l2) = (vf.len(), ee.len());
+            vf.dedup();
+            ee.dedup();
+            assert_eq!((vf.len(), ee.len()), (l1, l2), "step {step}: duplicates");
+            x = x1;
+        }
+        assert!(partial > 3 && full >= 2, "partial {partial}, full {full}");
     }
 
     #[test]
