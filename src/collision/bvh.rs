@@ -99,6 +99,9 @@ pub struct Bvh {
     order: Vec<u32>,
     /// The current primitive boxes.
     boxes: Vec<Aabb>,
+    /// The same boxes in `order`'s order (`leaf_boxes[k] = boxes[order[k]]`), so that the leaf
+    /// loops of a traversal read contiguous memory instead of jumping across the primitives.
+    leaf_boxes: Vec<Aabb>,
     /// Looseness (see [`Bvh::looseness`]) right after the last build.
     built_looseness: f64,
 }
@@ -109,7 +112,13 @@ pub const REBUILD_LOOSENESS_RATIO: f64 = 1.5;
 impl Bvh {
     /// Builds the tree over `boxes` (primitive i has box `boxes[i]`).
     pub fn build(boxes: Vec<Aabb>) -> Bvh {
-        let mut bvh = Bvh { nodes: Vec::new(), order: (0..boxes.len() as u32).collect(), boxes, built_looseness: 0.0 };
+        let mut bvh = Bvh {
+            nodes: Vec::new(),
+            order: (0..boxes.len() as u32).collect(),
+            leaf_boxes: boxes.clone(),
+            boxes,
+            built_looseness: 0.0,
+        };
         bvh.rebuild();
         bvh
     }
@@ -139,6 +148,7 @@ impl Bvh {
             let count = self.boxes.len();
             self.build_node(0, count);
         }
+        self.sort_leaf_boxes();
         self.built_looseness = self.looseness();
     }
 
@@ -171,6 +181,12 @@ impl Bvh {
         index
     }
 
+    fn sort_leaf_boxes(&mut self) {
+        for (b, &i) in self.leaf_boxes.iter_mut().zip(&self.order) {
+            *b = self.boxes[i as usize];
+        }
+    }
+
     /// Sum of the internal nodes' half areas over that of the primitive boxes: how much empty
     /// space the tree makes a query visit. Grows when refitting after large motions.
     pub fn looseness(&self) -> f64 {
@@ -185,12 +201,11 @@ impl Bvh {
     pub fn update(&mut self, boxes: &[Aabb]) -> bool {
         assert_eq!(boxes.len(), self.boxes.len(), "a BVH update must keep the primitive count");
         self.boxes.copy_from_slice(boxes);
+        self.sort_leaf_boxes();
         for n in (0..self.nodes.len()).rev() {
             let node = self.nodes[n];
             let aabb = if node.leaf {
-                self.order[node.a as usize..node.b as usize]
-                    .iter()
-                    .fold(Aabb::EMPTY, |acc, &i| acc.union(&self.boxes[i as usize]))
+                self.leaf_boxes[node.a as usize..node.b as usize].iter().fold(Aabb::EMPTY, |acc, b| acc.union(b))
             } else {
                 self.nodes[node.a as usize].aabb.union(&self.nodes[node.b as usize].aabb)
             };
@@ -216,10 +231,11 @@ impl Bvh {
             }
             match (nx.leaf, ny.leaf) {
                 (true, true) => {
-                    for &i in &self.order[nx.a as usize..nx.b as usize] {
-                        for &j in &other.order[ny.a as usize..ny.b as usize] {
-                            if self.boxes[i as usize].overlaps(&other.boxes[j as usize]) {
-                                f(i, j);
+                    for k in nx.a as usize..nx.b as usize {
+                        let bk = &self.leaf_boxes[k];
+                        for l in ny.a as usize..ny.b as usize {
+                            if bk.overlaps(&other.leaf_boxes[l]) {
+                                f(self.order[k], other.order[l]);
                             }
                         }
                     }
@@ -249,10 +265,10 @@ impl Bvh {
             let nx = &self.nodes[x as usize];
             if same {
                 if nx.leaf {
-                    let items = &self.order[nx.a as usize..nx.b as usize];
-                    for (k, &i) in items.iter().enumerate() {
-                        for &j in &items[k + 1..] {
-                            if self.boxes[i as usize].overlaps(&self.boxes[j as usize]) {
+                    for k in nx.a as usize..nx.b as usize {
+                        for l in k + 1..nx.b as usize {
+                            if self.leaf_boxes[k].overlaps(&self.leaf_boxes[l]) {
+                                let (i, j) = (self.order[k], self.order[l]);
                                 f(i.min(j), i.max(j));
                             }
                         }
@@ -268,9 +284,10 @@ impl Bvh {
             }
             match (nx.leaf, ny.leaf) {
                 (true, true) => {
-                    for &i in &self.order[nx.a as usize..nx.b as usize] {
-                        for &j in &self.order[ny.a as usize..ny.b as usize] {
-                            if self.boxes[i as usize].overlaps(&self.boxes[j as usize]) {
+                    for k in nx.a as usize..nx.b as usize {
+                        for l in ny.a as usize..ny.b as usize {
+                            if self.leaf_boxes[k].overlaps(&self.leaf_boxes[l]) {
+                                let (i, j) = (self.order[k], self.order[l]);
                                 f(i.min(j), i.max(j));
                             }
                         }

@@ -289,7 +289,8 @@ impl SelfContact {
         fn b<T>(v: &Vec<T>) -> usize {
             v.capacity() * std::mem::size_of::<T>()
         }
-        let tree = |n: usize| n * (std::mem::size_of::<Aabb>() + 4) + n.div_ceil(2) * 64;
+        // Per primitive: its box, the box again in leaf order, its index in the order.
+        let tree = |n: usize| n * (2 * std::mem::size_of::<Aabb>() + 4) + n.div_ceil(2) * 64;
         std::mem::size_of::<Self>()
             + b(&self.edges)
             + b(&self.triangles)
