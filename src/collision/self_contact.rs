@@ -123,11 +123,22 @@ pub struct SelfContact {
     settings: CcdSettings,
 }
 
-/// Reach margin of a vertex: this many times its own displacement in the step that refills the
-/// cached pairs, plus [`REACH_SHARED`] times the largest displacement (and the thickness).
-const REACH_OWN: f64 = 1.0;
-/// See [`REACH_OWN`]: a vertex at rest in that step may start moving.
-const REACH_SHARED: f64 = 0.25;
+/// Reach of a vertex: the box of its two positions and of the end position carried on by
+/// [`REACH_AHEAD`] more steps of the same displacement (steady motion stays inside for that many
+/// steps), grown by [`REACH_OWN`] times its own displacement plus [`REACH_SHARED`] times the
+/// largest one (and the thickness). Measured on the kitten at default settings (the bench): these
+/// balance refills against the size of the cache.
+const REACH_AHEAD: f32 = 3.0;
+/// See [`REACH_AHEAD`].
+const REACH_OWN: f64 = 0.5;
+/// See [`REACH_AHEAD`]: a vertex at rest in that step may start moving.
+const REACH_SHARED: f64 = 0.1;
+
+/// The reach box of a vertex moving from `x0` to `x1` (see [`REACH_AHEAD`]).
+fn reach_box(x0: Vec3, x1: Vec3, margin: f64) -> Aabb {
+    let ahead = x1 + (x1 - x0) * REACH_AHEAD;
+    Aabb::around(&[d(x0), d(x1), d(ahead)], margin)
+}
 /// When at most 1/this of the vertices left their reach, only their pairs are found again.
 const PARTIAL_REFILL_SHARE: usize = 3;
 
@@ -318,9 +329,9 @@ impl SelfContact {
     /// found for. Then a primitive's swept box lies in the union of its vertices' reach boxes,
     /// so two swept boxes within `thickness` imply reach unions within it, and the traversal
     /// that filled the cache collected the pair. Otherwise the reach boxes of the vertices that
-    /// left are set anew (the box of the vertex's two positions grown by a margin: a few times
-    /// its own displacement plus a share of the largest one, so that steady motion keeps the
-    /// cache for several steps), and only their pairs are found again
+    /// left are set anew (the box of the vertex's positions now and a few steps ahead, grown by a
+    /// margin, see [`REACH_AHEAD`], so that steady motion keeps the cache for several steps),
+    /// and only their pairs are found again
     /// ([`SelfContact::refill_escaped`]); when many left, or the thickness grew, every reach box
     /// is set anew, the trees are refit (or rebuilt) over the reach unions and the cache is
     /// refilled. Returns the number of trees rebuilt, or None when the cache still held.
@@ -340,8 +351,7 @@ impl SelfContact {
         }
         let largest = (0..n).map(motion).fold(0.0, f64::max);
         for v in 0..n {
-            let margin = REACH_OWN * motion(v) + REACH_SHARED * largest + thickness;
-            self.reach[v] = Aabb::around(&[d(x0[v]), d(x1[v])], margin);
+            self.reach[v] = reach_box(x0[v], x1[v], REACH_OWN * motion(v) + REACH_SHARED * largest + thickness);
         }
         let half = 0.5 * thickness;
         let reach = &self.reach;
@@ -389,8 +399,7 @@ impl SelfContact {
         let half = 0.5 * thickness;
         for &v in &self.escaped {
             let v = v as usize;
-            let margin = REACH_OWN * motion(v) + REACH_SHARED * largest + thickness;
-            self.reach[v] = Aabb::around(&[d(x0[v]), d(x1[v])], margin);
+            self.reach[v] = reach_box(x0[v], x1[v], REACH_OWN * motion(v) + REACH_SHARED * largest + thickness);
             self.dirty_vertex[v] = true;
         }
         let (reach, dirty) = (&self.reach, &self.dirty_vertex);
