@@ -102,6 +102,8 @@ pub struct Bvh {
     /// The same boxes in `order`'s order (`leaf_boxes[k] = boxes[order[k]]`), so that the leaf
     /// loops of a traversal read contiguous memory instead of jumping across the primitives.
     leaf_boxes: Vec<Aabb>,
+    /// Inverse of `order`: primitive i is at `order[slot[i]]`.
+    slot: Vec<u32>,
     /// Looseness (see [`Bvh::looseness`]) right after the last build.
     built_looseness: f64,
 }
@@ -116,6 +118,7 @@ impl Bvh {
             nodes: Vec::new(),
             order: (0..boxes.len() as u32).collect(),
             leaf_boxes: boxes.clone(),
+            slot: (0..boxes.len() as u32).collect(),
             boxes,
             built_looseness: 0.0,
         };
@@ -182,8 +185,9 @@ impl Bvh {
     }
 
     fn sort_leaf_boxes(&mut self) {
-        for (b, &i) in self.leaf_boxes.iter_mut().zip(&self.order) {
+        for (k, (b, &i)) in self.leaf_boxes.iter_mut().zip(&self.order).enumerate() {
             *b = self.boxes[i as usize];
+            self.slot[i as usize] = k as u32;
         }
     }
 
@@ -202,6 +206,26 @@ impl Bvh {
         assert_eq!(boxes.len(), self.boxes.len(), "a BVH update must keep the primitive count");
         self.boxes.copy_from_slice(boxes);
         self.sort_leaf_boxes();
+        self.refit_nodes();
+        if self.looseness() > REBUILD_LOOSENESS_RATIO * self.built_looseness {
+            self.rebuild();
+            return true;
+        }
+        false
+    }
+
+    /// Replaces the boxes of the primitives `changed` by theirs in `boxes` (indexed by primitive)
+    /// and refits every node, without the looseness check of [`Bvh::update`] (for a few changed
+    /// boxes between full updates).
+    pub fn update_some(&mut self, changed: &[u32], boxes: &[Aabb]) {
+        for &i in changed {
+            self.boxes[i as usize] = boxes[i as usize];
+            self.leaf_boxes[self.slot[i as usize] as usize] = boxes[i as usize];
+        }
+        self.refit_nodes();
+    }
+
+    fn refit_nodes(&mut self) {
         for n in (0..self.nodes.len()).rev() {
             let node = self.nodes[n];
             let aabb = if node.leaf {
@@ -211,11 +235,6 @@ impl Bvh {
             };
             self.nodes[n].aabb = aabb;
         }
-        if self.looseness() > REBUILD_LOOSENESS_RATIO * self.built_looseness {
-            self.rebuild();
-            return true;
-        }
-        false
     }
 
     /// Calls `f(i, j)` for every primitive `i` of `self` and `j` of `other` whose boxes overlap.

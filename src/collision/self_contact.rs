@@ -300,8 +300,8 @@ impl SelfContact {
         fn b<T>(v: &Vec<T>) -> usize {
             v.capacity() * std::mem::size_of::<T>()
         }
-        // Per primitive: its box, the box again in leaf order, its index in the order.
-        let tree = |n: usize| n * (2 * std::mem::size_of::<Aabb>() + 4) + n.div_ceil(2) * 64;
+        // Per primitive: its box, the box again in leaf order, its index in the order and back.
+        let tree = |n: usize| n * (2 * std::mem::size_of::<Aabb>() + 8) + n.div_ceil(2) * 64;
         std::mem::size_of::<Self>()
             + b(&self.edges)
             + b(&self.triangles)
@@ -346,7 +346,8 @@ impl SelfContact {
                 return None;
             }
             if self.escaped.len() * PARTIAL_REFILL_SHARE <= n {
-                return Some(self.refill_escaped(x0, x1));
+                self.refill_escaped(x0, x1);
+                return Some(0);
             }
         }
         let largest = (0..n).map(motion).fold(0.0, f64::max);
@@ -391,8 +392,8 @@ impl SelfContact {
     /// left their reach: new reach boxes for them, new boxes for the primitives they belong to,
     /// the trees refit, the cached pairs of those primitives dropped and found again by querying
     /// small trees over them against the full ones. The cache then equals what a full refill
-    /// with these reach boxes would hold. Returns the number of trees rebuilt.
-    fn refill_escaped(&mut self, x0: &[Vec3], x1: &[Vec3]) -> u64 {
+    /// with these reach boxes would hold.
+    fn refill_escaped(&mut self, x0: &[Vec3], x1: &[Vec3]) {
         let motion = |v: usize| (x1[v] - x0[v]).abs().max_element() as f64;
         let largest = (0..x0.len()).map(motion).fold(0.0, f64::max);
         let thickness = self.pairs_thickness;
@@ -424,9 +425,10 @@ impl SelfContact {
                 mf.push(f as u32);
             }
         }
-        let rebuilt = u64::from(self.vertex_tree.update(&self.vertex_boxes))
-            + u64::from(self.edge_tree.update(&self.edge_boxes))
-            + u64::from(self.face_tree.update(&self.face_boxes));
+        // Refit only: the full refills check the trees' looseness.
+        self.vertex_tree.update_some(&mv, &self.vertex_boxes);
+        self.edge_tree.update_some(&me, &self.edge_boxes);
+        self.face_tree.update_some(&mf, &self.face_boxes);
         let (dv, de, df) = (&self.dirty_vertex, &self.dirty_edge, &self.dirty_face);
         self.vf_pairs.retain(|&(v, f)| !dv[v as usize] && !df[f as usize]);
         self.ee_pairs.retain(|&(i, j)| !de[i as usize] && !de[j as usize]);
@@ -463,7 +465,6 @@ impl SelfContact {
         for &f in &mf {
             self.dirty_face[f as usize] = false;
         }
-        rebuilt
     }
 
     /// [`SelfContact::ensure_pairs`], counting cache refills; returns the tree rebuilds.
