@@ -29,6 +29,13 @@ impl Aabb {
                 b.max[axis] = b.max[axis].max(x);
             }
         }
+        b.grown(margin)
+    }
+
+    /// This box grown by `margin` plus a few units in the last place of each coordinate, so that
+    /// rounding can never make it smaller than the exact grown box.
+    pub fn grown(&self, margin: f64) -> Aabb {
+        let mut b = *self;
         for axis in 0..3 {
             // The slack (4 eps of |coordinate| + margin) covers the two roundings below.
             let grow = |x: f64| margin + (x.abs() + margin) * (4.0 * f64::EPSILON);
@@ -36,6 +43,12 @@ impl Aabb {
             b.max[axis] += grow(b.max[axis]);
         }
         b
+    }
+
+    /// Whether the closed box holds the point (exact comparisons; false for NaN).
+    #[inline]
+    pub fn contains(&self, p: &V3) -> bool {
+        (0..3).all(|k| self.min[k] <= p[k] && p[k] <= self.max[k])
     }
 
     /// The smallest box holding both.
@@ -86,6 +99,11 @@ pub struct Bvh {
     order: Vec<u32>,
     /// The current primitive boxes.
     boxes: Vec<Aabb>,
+    /// The same boxes in `order`'s order (`leaf_boxes[k] = boxes[order[k]]`), so that the leaf
+    /// loops of a traversal read contiguous memory instead of jumping across the primitives.
+    leaf_boxes: Vec<Aabb>,
+    /// Inverse of `order`: primitive i is at `order[slot[i]]`.
+    slot: Vec<u32>,
     /// Looseness (see [`Bvh::looseness`]) right after the last build.
     built_looseness: f64,
 }
@@ -96,7 +114,14 @@ pub const REBUILD_LOOSENESS_RATIO: f64 = 1.5;
 impl Bvh {
     /// Builds the tree over `boxes` (primitive i has box `boxes[i]`).
     pub fn build(boxes: Vec<Aabb>) -> Bvh {
-        let mut bvh = Bvh { nodes: Vec::new(), order: (0..boxes.len() as u32).collect(), boxes, built_looseness: 0.0 };
+        let mut bvh = Bvh {
+            nodes: Vec::new(),
+            order: (0..boxes.len() as u32).collect(),
+            leaf_boxes: boxes.clone(),
+            slot: (0..boxes.len() as u32).collect(),
+            boxes,
+            built_looseness: 0.0,
+        };
         bvh.rebuild();
         bvh
     }
@@ -126,6 +151,7 @@ impl Bvh {
             let count = self.boxes.len();
             self.build_node(0, count);
         }
+        self.sort_leaf_boxes();
         self.built_looseness = self.looseness();
     }
 
@@ -158,6 +184,13 @@ impl Bvh {
         index
     }
 
+    fn sort_leaf_boxes(&mut self) {
+        for (k, (b, &i)) in self.leaf_boxes.iter_mut().zip(&self.order).enumerate() {
+            *b = self.boxes[i as usize];
+            self.slot[i as usize] = k as u32;
+        }
+    }
+
     /// Sum of the internal nodes' half areas over that of the primitive boxes: how much empty
     /// space the tree makes a query visit. Grows when refitting after large motions.
     pub fn looseness(&self) -> f64 {
@@ -172,22 +205,36 @@ impl Bvh {
     pub fn update(&mut self, boxes: &[Aabb]) -> bool {
         assert_eq!(boxes.len(), self.boxes.len(), "a BVH update must keep the primitive count");
         self.boxes.copy_from_slice(boxes);
-        for n in (0..self.nodes.len()).rev() {
-            let node = self.nodes[n];
-            let aabb = if node.leaf {
-                self.order[node.a as usize..node.b as usize]
-                    .iter()
-                    .fold(Aabb::EMPTY, |acc, &i| acc.union(&self.boxes[i as usize]))
-            } else {
-                self.nodes[node.a as usize].aabb.union(&self.nodes[node.b as usize].aabb)
-            };
-            self.nodes[n].aabb = aabb;
-        }
+        self.sort_leaf_boxes();
+        self.refit_nodes();
         if self.looseness() > REBUILD_LOOSENESS_RATIO * self.built_looseness {
             self.rebuild();
             return true;
         }
         false
+    }
+
+    /// Replaces the boxes of the primitives `changed` by theirs in `boxes` (indexed by primitive)
+    /// and refits every node, without the looseness check of [`Bvh::update`] (for a few changed
+    /// boxes between full updates).
+    pub fn update_some(&mut self, changed: &[u32], boxes: &[Aabb]) {
+        for &i in changed {
+            self.boxes[i as usize] = boxes[i as usize];
+            self.leaf_boxes[self.slot[i as usize] as usize] = boxes[i as usize];
+        }
+        self.refit_nodes();
+    }
+
+    fn refit_nodes(&mut self) {
+        for n in (0..self.nodes.len()).rev() {
+            let node = self.nodes[n];
+            let aabb = if node.leaf {
+                self.leaf_boxes[node.a as usize..node.b as usize].iter().fold(Aabb::EMPTY, |acc, b| acc.union(b))
+            } else {
+                self.nodes[node.a as usize].aabb.union(&self.nodes[node.b as usize].aabb)
+            };
+            self.nodes[n].aabb = aabb;
+        }
     }
 
     /// Calls `f(i, j)` for every primitive `i` of `self` and `j` of `other` whose boxes overlap.
@@ -203,10 +250,11 @@ impl Bvh {
             }
             match (nx.leaf, ny.leaf) {
                 (true, true) => {
-                    for &i in &self.order[nx.a as usize..nx.b as usize] {
-                        for &j in &other.order[ny.a as usize..ny.b as usize] {
-                            if self.boxes[i as usize].overlaps(&other.boxes[j as usize]) {
-                                f(i, j);
+                    for k in nx.a as usize..nx.b as usize {
+                        let bk = &self.leaf_boxes[k];
+                        for l in ny.a as usize..ny.b as usize {
+                            if bk.overlaps(&other.leaf_boxes[l]) {
+                                f(self.order[k], other.order[l]);
                             }
                         }
                     }
@@ -236,10 +284,10 @@ impl Bvh {
             let nx = &self.nodes[x as usize];
             if same {
                 if nx.leaf {
-                    let items = &self.order[nx.a as usize..nx.b as usize];
-                    for (k, &i) in items.iter().enumerate() {
-                        for &j in &items[k + 1..] {
-                            if self.boxes[i as usize].overlaps(&self.boxes[j as usize]) {
+                    for k in nx.a as usize..nx.b as usize {
+                        for l in k + 1..nx.b as usize {
+                            if self.leaf_boxes[k].overlaps(&self.leaf_boxes[l]) {
+                                let (i, j) = (self.order[k], self.order[l]);
                                 f(i.min(j), i.max(j));
                             }
                         }
@@ -255,9 +303,10 @@ impl Bvh {
             }
             match (nx.leaf, ny.leaf) {
                 (true, true) => {
-                    for &i in &self.order[nx.a as usize..nx.b as usize] {
-                        for &j in &self.order[ny.a as usize..ny.b as usize] {
-                            if self.boxes[i as usize].overlaps(&self.boxes[j as usize]) {
+                    for k in nx.a as usize..nx.b as usize {
+                        for l in ny.a as usize..ny.b as usize {
+                            if self.leaf_boxes[k].overlaps(&self.leaf_boxes[l]) {
+                                let (i, j) = (self.order[k], self.order[l]);
                                 f(i.min(j), i.max(j));
                             }
                         }

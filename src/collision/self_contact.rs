@@ -1,6 +1,8 @@
-//! Self-contact of a closed triangle mesh moving over one step (SPEC 1.6): swept-box BVHs of
-//! vertices, edges and faces refit every step (rebuilt when loose), candidate vertex-face and
-//! edge-edge pairs that share no vertex, the filters and the exact conservative CCD of
+//! Self-contact of a closed triangle mesh moving over one step (SPEC 1.6): candidate vertex-face
+//! and edge-edge pairs that share no vertex, kept across steps in a cache (a Verlet list) filled
+//! from BVHs of vertices, edges and faces over boxes grown by a reach margin, refit (rebuilt when
+//! loose) only when a vertex leaves its reach; each step the pairs' swept boxes, the filters and
+//! the exact conservative CCD of
 //! [`super::ccd`], then the contact constraints `C_vf >= 0`, `C_ee >= 0` projected on the end
 //! positions, with the side taken from the start of the step.
 //!
@@ -12,7 +14,8 @@
 //!
 //! Knows nothing of the simulator that moves the mesh (positions, inverse masses in; corrected
 //! positions and velocities out). Runs serially in a fixed order: results do not depend on
-//! threads. Allocates only when a step has more contacts than the last largest one.
+//! threads. Allocates only when a step has more contacts, or the cache more pairs, than the
+//! largest before.
 
 // NaN must fail every guard below, so comparisons are written `!(x > limit)` on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
@@ -21,7 +24,7 @@ use glam::{DVec3, Vec3};
 
 use super::bvh::{Aabb, Bvh};
 use super::ccd::{CcdSettings, Stage, edge_edge_with, vertex_triangle_with};
-use super::filters::V3;
+use super::filters::{V3, swept_aabbs_separated};
 use super::hull_filter::{edge_edge_hulls_separated, vertex_triangle_hulls_separated};
 
 /// Projection rounds (projection, then re-check of the moved pairs) before the fail-safe.
@@ -40,7 +43,10 @@ pub struct ContactCounts {
     /// Candidates left after the swept-hull separating-axis filter ([`super::hull_filter`]) and
     /// the exact swept-box test of each pair.
     pub after_boxes: u64,
-    /// Candidates left after the deforming non-penetration (plane) filter: exact tests run.
+    /// Candidates left after the deforming non-penetration (plane) filter: exact tests run. A
+    /// test is the inclusion search, or, for a pair whose distance at the start or at one of a
+    /// few sample times of the step is within the thickness (plus a slack), the estimate of its
+    /// time from those distances (see [`CcdSettings::certain_contact_slack`]).
     pub ccd_tests: u64,
     /// Contact constraints projected (all rounds).
     pub contacts: u64,
@@ -48,6 +54,8 @@ pub struct ContactCounts {
     pub reverted: u64,
     /// BVH rebuilds.
     pub rebuilds: u64,
+    /// Refills of the cached candidate pairs (see `SelfContact::ensure_pairs`).
+    pub pair_refills: u64,
     /// Rounds run (1 = no contact needed a re-check).
     pub rounds: u64,
 }
@@ -61,6 +69,7 @@ impl ContactCounts {
         self.contacts += other.contacts;
         self.reverted += other.reverted;
         self.rebuilds += other.rebuilds;
+        self.pair_refills += other.pair_refills;
         self.rounds += other.rounds;
     }
 }
@@ -89,6 +98,23 @@ pub struct SelfContact {
     vertex_boxes: Vec<Aabb>,
     edge_boxes: Vec<Aabb>,
     face_boxes: Vec<Aabb>,
+    /// Per vertex: the box its positions must stay in for the cached pairs to hold (see
+    /// [`SelfContact::ensure_pairs`]).
+    reach: Vec<Aabb>,
+    /// Cached (vertex, face) pairs sharing no vertex whose reach boxes come within
+    /// `pairs_thickness`: a superset of the pairs whose swept boxes do, while every vertex stays
+    /// in its reach.
+    vf_pairs: Vec<(u32, u32)>,
+    /// Cached (edge, edge) pairs, first index smaller, likewise.
+    ee_pairs: Vec<(u32, u32)>,
+    /// The thickness the cached pairs were found for; NaN when there are none.
+    pairs_thickness: f64,
+    /// Vertices that left their reach (scratch of [`SelfContact::ensure_pairs`]).
+    escaped: Vec<u32>,
+    /// Per vertex, edge, face: touched by an escaped vertex (scratch, all false between calls).
+    dirty_vertex: Vec<bool>,
+    dirty_edge: Vec<bool>,
+    dirty_face: Vec<bool>,
     /// Per vertex: bit 0 = moved by the last projection round, bit 1 = put back by the fail-safe.
     flags: Vec<u8>,
     contacts: Vec<Contact>,
@@ -96,6 +122,30 @@ pub struct SelfContact {
     hits: Vec<(u8, u32, u32, f64)>,
     settings: CcdSettings,
 }
+
+/// Reach of a vertex: the box of its two positions and of the end position carried on by
+/// [`REACH_AHEAD`] more steps of the same displacement (steady motion stays inside for that many
+/// steps), grown by [`REACH_OWN`] times its own displacement plus [`REACH_SHARED`] times the
+/// largest one (and the thickness). Measured on the kitten at default settings (the bench): these
+/// balance refills against the size of the cache.
+const REACH_AHEAD: f32 = 3.0;
+/// See [`REACH_AHEAD`].
+const REACH_OWN: f64 = 0.5;
+/// See [`REACH_AHEAD`]: a vertex at rest in that step may start moving.
+const REACH_SHARED: f64 = 0.1;
+
+/// The reach box of a vertex moving from `x0` to `x1` (see [`REACH_AHEAD`]).
+fn reach_box(x0: Vec3, x1: Vec3, margin: f64) -> Aabb {
+    let ahead = x1 + (x1 - x0) * REACH_AHEAD;
+    Aabb::around(&[d(x0), d(x1), d(ahead)], margin)
+}
+/// When at most 1/this of the vertices left their reach, only their pairs are found again.
+const PARTIAL_REFILL_SHARE: usize = 3;
+
+/// See [`CcdSettings::certain_contact_slack`]: pairs sampled within 1.75 thicknesses are contacts
+/// without a search. In a crushed shell thousands of pairs rest about the thickness apart, and
+/// the search would take hundreds of sub-domains each to tell 0.99 from 1.01 thicknesses.
+const CERTAIN_CONTACT_SLACK: f64 = 0.75;
 
 const MOVED: u8 = 1;
 const REVERTED: u8 = 2;
@@ -222,10 +272,25 @@ impl SelfContact {
             vertex_boxes,
             edge_boxes,
             face_boxes,
+            reach: vec![Aabb::EMPTY; x.len()],
+            // Enough for the pairs of a mesh at rest (the first step) without reallocation.
+            vf_pairs: Vec::with_capacity(x.len() + 64),
+            ee_pairs: Vec::with_capacity(edges.len() + 64),
+            pairs_thickness: f64::NAN,
+            escaped: Vec::with_capacity(x.len()),
+            dirty_vertex: vec![false; x.len()],
+            dirty_edge: vec![false; edges.len()],
+            dirty_face: vec![false; triangles.len()],
             flags: vec![0; x.len()],
             contacts: Vec::with_capacity(reserve),
             hits: Vec::with_capacity(reserve),
-            settings: CcdSettings::default(),
+            // Most pairs that reach the exact stage in a contracting shell do collide: pairs
+            // projected to the thickness in the last step start this one about the thickness
+            // apart, and most others are within it at some sample time. The time of such a
+            // contact only sets its normal and weights (SPEC 1.6; the side comes from the start
+            // of the step), so it is estimated from below instead of searched to 2^-20: the
+            // search is left for the pairs whose answer is in doubt.
+            settings: CcdSettings { certain_contact_slack: Some(CERTAIN_CONTACT_SLACK), ..CcdSettings::default() },
         }
     }
 
@@ -235,7 +300,8 @@ impl SelfContact {
         fn b<T>(v: &Vec<T>) -> usize {
             v.capacity() * std::mem::size_of::<T>()
         }
-        let tree = |n: usize| n * (std::mem::size_of::<Aabb>() + 4) + n.div_ceil(2) * 64;
+        // Per primitive: its box, the box again in leaf order, its index in the order and back.
+        let tree = |n: usize| n * (2 * std::mem::size_of::<Aabb>() + 8) + n.div_ceil(2) * 64;
         std::mem::size_of::<Self>()
             + b(&self.edges)
             + b(&self.triangles)
@@ -245,20 +311,171 @@ impl SelfContact {
             + b(&self.vertex_boxes)
             + b(&self.edge_boxes)
             + b(&self.face_boxes)
+            + b(&self.reach)
+            + b(&self.vf_pairs)
+            + b(&self.ee_pairs)
+            + b(&self.escaped)
+            + b(&self.dirty_vertex)
+            + b(&self.dirty_edge)
+            + b(&self.dirty_face)
             + b(&self.flags)
             + b(&self.contacts)
             + b(&self.hits)
     }
 
-    fn refit(&mut self, x0: &[Vec3], x1: &[Vec3], half: f64) -> u64 {
-        for (v, b) in self.vertex_boxes.iter_mut().enumerate() {
-            *b = Aabb::around(&[d(x0[v]), d(x1[v])], half);
+    /// Makes sure the cached pairs hold every pair whose swept boxes over `x0 -> x1` come within
+    /// `thickness` (a Verlet list, as in molecular dynamics): they do while every vertex's
+    /// positions at both ends stay in its reach box and `thickness` is at most the one they were
+    /// found for. Then a primitive's swept box lies in the union of its vertices' reach boxes,
+    /// so two swept boxes within `thickness` imply reach unions within it, and the traversal
+    /// that filled the cache collected the pair. Otherwise the reach boxes of the vertices that
+    /// left are set anew (the box of the vertex's positions now and a few steps ahead, grown by a
+    /// margin, see [`REACH_AHEAD`], so that steady motion keeps the cache for several steps),
+    /// and only their pairs are found again
+    /// ([`SelfContact::refill_escaped`]); when many left, or the thickness grew, every reach box
+    /// is set anew, the trees are refit (or rebuilt) over the reach unions and the cache is
+    /// refilled. Returns the number of trees rebuilt, or None when the cache still held.
+    fn ensure_pairs(&mut self, x0: &[Vec3], x1: &[Vec3], thickness: f64) -> Option<u64> {
+        let n = x0.len();
+        let motion = |v: usize| (x1[v] - x0[v]).abs().max_element() as f64;
+        let outside = |r: &Aabb, v: usize| !(r.contains(&d(x0[v])) && r.contains(&d(x1[v])));
+        if thickness <= self.pairs_thickness {
+            self.escaped.clear();
+            self.escaped.extend((0..n as u32).filter(|&v| outside(&self.reach[v as usize], v as usize)));
+            if self.escaped.is_empty() {
+                return None;
+            }
+            if self.escaped.len() * PARTIAL_REFILL_SHARE <= n {
+                self.refill_escaped(x0, x1);
+                return Some(0);
+            }
         }
-        fill_boxes(x0, x1, &self.edges, half, &mut self.edge_boxes);
-        fill_boxes(x0, x1, &self.triangles, half, &mut self.face_boxes);
-        u64::from(self.vertex_tree.update(&self.vertex_boxes))
+        let largest = (0..n).map(motion).fold(0.0, f64::max);
+        for v in 0..n {
+            self.reach[v] = reach_box(x0[v], x1[v], REACH_OWN * motion(v) + REACH_SHARED * largest + thickness);
+        }
+        let half = 0.5 * thickness;
+        let reach = &self.reach;
+        let union = |prim: &[u32]| prim.iter().fold(Aabb::EMPTY, |acc, &v| acc.union(&reach[v as usize])).grown(half);
+        for (v, b) in self.vertex_boxes.iter_mut().enumerate() {
+            *b = union(&[v as u32]);
+        }
+        for (e, b) in self.edges.iter().zip(self.edge_boxes.iter_mut()) {
+            *b = union(e);
+        }
+        for (t, b) in self.triangles.iter().zip(self.face_boxes.iter_mut()) {
+            *b = union(t);
+        }
+        let rebuilt = u64::from(self.vertex_tree.update(&self.vertex_boxes))
             + u64::from(self.edge_tree.update(&self.edge_boxes))
-            + u64::from(self.face_tree.update(&self.face_boxes))
+            + u64::from(self.face_tree.update(&self.face_boxes));
+        let (tris, edges) = (&self.triangles, &self.edges);
+        let (vf, ee) = (&mut self.vf_pairs, &mut self.ee_pairs);
+        vf.clear();
+        ee.clear();
+        self.vertex_tree.for_each_overlap(&self.face_tree, |v, f| {
+            if !tris[f as usize].contains(&v) {
+                vf.push((v, f));
+            }
+        });
+        self.edge_tree.for_each_self_overlap(|i, j| {
+            let ([a, b], [c, e]) = (edges[i as usize], edges[j as usize]);
+            if a != c && a != e && b != c && b != e {
+                ee.push((i, j));
+            }
+        });
+        self.pairs_thickness = thickness;
+        Some(rebuilt)
+    }
+
+    /// The partial refill of [`SelfContact::ensure_pairs`] when few vertices (`self.escaped`)
+    /// left their reach: new reach boxes for them, new boxes for the primitives they belong to,
+    /// the trees refit, the cached pairs of those primitives dropped and found again by querying
+    /// small trees over them against the full ones. The cache then equals what a full refill
+    /// with these reach boxes would hold.
+    fn refill_escaped(&mut self, x0: &[Vec3], x1: &[Vec3]) {
+        let motion = |v: usize| (x1[v] - x0[v]).abs().max_element() as f64;
+        let largest = (0..x0.len()).map(motion).fold(0.0, f64::max);
+        let thickness = self.pairs_thickness;
+        let half = 0.5 * thickness;
+        for &v in &self.escaped {
+            let v = v as usize;
+            self.reach[v] = reach_box(x0[v], x1[v], REACH_OWN * motion(v) + REACH_SHARED * largest + thickness);
+            self.dirty_vertex[v] = true;
+        }
+        let (reach, dirty) = (&self.reach, &self.dirty_vertex);
+        let union = |prim: &[u32]| prim.iter().fold(Aabb::EMPTY, |acc, &v| acc.union(&reach[v as usize])).grown(half);
+        let touched = |prim: &[u32]| prim.iter().any(|&v| dirty[v as usize]);
+        let (mut mv, mut me, mut mf) = (Vec::new(), Vec::new(), Vec::new());
+        for &v in &self.escaped {
+            self.vertex_boxes[v as usize] = union(&[v]);
+            mv.push(v);
+        }
+        for (e, prim) in self.edges.iter().enumerate() {
+            if touched(prim) {
+                self.edge_boxes[e] = union(prim);
+                self.dirty_edge[e] = true;
+                me.push(e as u32);
+            }
+        }
+        for (f, prim) in self.triangles.iter().enumerate() {
+            if touched(prim) {
+                self.face_boxes[f] = union(prim);
+                self.dirty_face[f] = true;
+                mf.push(f as u32);
+            }
+        }
+        // Refit only: the full refills check the trees' looseness.
+        self.vertex_tree.update_some(&mv, &self.vertex_boxes);
+        self.edge_tree.update_some(&me, &self.edge_boxes);
+        self.face_tree.update_some(&mf, &self.face_boxes);
+        let (dv, de, df) = (&self.dirty_vertex, &self.dirty_edge, &self.dirty_face);
+        self.vf_pairs.retain(|&(v, f)| !dv[v as usize] && !df[f as usize]);
+        self.ee_pairs.retain(|&(i, j)| !de[i as usize] && !de[j as usize]);
+        let (tris, edges) = (&self.triangles, &self.edges);
+        let (vf, ee) = (&mut self.vf_pairs, &mut self.ee_pairs);
+        let subset = |ids: &[u32], boxes: &[Aabb]| Bvh::build(ids.iter().map(|&i| boxes[i as usize]).collect());
+        // Escaped vertices against every face; every other vertex against the touched faces.
+        subset(&mv, &self.vertex_boxes).for_each_overlap(&self.face_tree, |k, f| {
+            let v = mv[k as usize];
+            if !tris[f as usize].contains(&v) {
+                vf.push((v, f));
+            }
+        });
+        self.vertex_tree.for_each_overlap(&subset(&mf, &self.face_boxes), |v, k| {
+            let f = mf[k as usize];
+            if !dv[v as usize] && !tris[f as usize].contains(&v) {
+                vf.push((v, f));
+            }
+        });
+        // Touched edges against every edge; a pair of two touched edges once.
+        subset(&me, &self.edge_boxes).for_each_overlap(&self.edge_tree, |k, j| {
+            let i = me[k as usize];
+            let ([a, b], [c, e]) = (edges[i as usize], edges[j as usize]);
+            if (!de[j as usize] || i < j) && a != c && a != e && b != c && b != e {
+                ee.push((i.min(j), i.max(j)));
+            }
+        });
+        for &v in &self.escaped {
+            self.dirty_vertex[v as usize] = false;
+        }
+        for &e in &me {
+            self.dirty_edge[e as usize] = false;
+        }
+        for &f in &mf {
+            self.dirty_face[f as usize] = false;
+        }
+    }
+
+    /// [`SelfContact::ensure_pairs`], counting cache refills; returns the tree rebuilds.
+    fn ensure_pairs_counted(&mut self, x0: &[Vec3], x1: &[Vec3], thickness: f64, counts: &mut ContactCounts) -> u64 {
+        match self.ensure_pairs(x0, x1, thickness) {
+            Some(rebuilt) => {
+                counts.pair_refills += 1;
+                rebuilt
+            }
+            None => 0,
+        }
     }
 
     /// Finds the pairs that may come within `thickness` over `x0 -> x1` into `self.hits`.
@@ -298,6 +515,14 @@ impl SelfContact {
                 }
                 let start = [d(x0[v as usize]), d(x0[t[0] as usize]), d(x0[t[1] as usize]), d(x0[t[2] as usize])];
                 let end = [d(x1[v as usize]), d(x1[t[0] as usize]), d(x1[t[1] as usize]), d(x1[t[2] as usize])];
+                // The cached pairs are a superset: the swept boxes decide who is a candidate.
+                if swept_aabbs_separated(
+                    &[start[0], end[0]],
+                    &[start[1], start[2], start[3], end[1], end[2], end[3]],
+                    thickness,
+                ) {
+                    return;
+                }
                 if vertex_triangle_hulls_separated(&start, &end, thickness) {
                     tally(None);
                     return;
@@ -315,6 +540,13 @@ impl SelfContact {
                 }
                 let start = [d(x0[a as usize]), d(x0[b as usize]), d(x0[c as usize]), d(x0[e as usize])];
                 let end = [d(x1[a as usize]), d(x1[b as usize]), d(x1[c as usize]), d(x1[e as usize])];
+                if swept_aabbs_separated(
+                    &[start[0], start[1], end[0], end[1]],
+                    &[start[2], start[3], end[2], end[3]],
+                    thickness,
+                ) {
+                    return;
+                }
                 if edge_edge_hulls_separated(&start, &end, thickness) {
                     tally(None);
                     return;
@@ -326,21 +558,11 @@ impl SelfContact {
                 }
             }
         };
-        if !only_moved {
-            self.vertex_tree.for_each_overlap(&self.face_tree, |v, f| test(0, v, f));
-            self.edge_tree.for_each_self_overlap(|i, j| test(1, i, j));
-        } else {
-            // Only primitives with a moved vertex: small trees over them, queried against the
-            // full ones (a pair of two moved primitives may come twice: deduplicated below).
-            let moved = |v: u32| flags[v as usize] & MOVED != 0;
-            let mv: Vec<u32> = (0..flags.len() as u32).filter(|&v| moved(v)).collect();
-            let mf: Vec<u32> = (0..tris.len() as u32).filter(|&f| tris[f as usize].iter().any(|&v| moved(v))).collect();
-            let me: Vec<u32> =
-                (0..edges.len() as u32).filter(|&e| edges[e as usize].iter().any(|&v| moved(v))).collect();
-            let subset = |ids: &[u32], boxes: &[Aabb]| Bvh::build(ids.iter().map(|&i| boxes[i as usize]).collect());
-            subset(&mv, &self.vertex_boxes).for_each_overlap(&self.face_tree, |k, f| test(0, mv[k as usize], f));
-            self.vertex_tree.for_each_overlap(&subset(&mf, &self.face_boxes), |v, k| test(0, v, mf[k as usize]));
-            subset(&me, &self.edge_boxes).for_each_overlap(&self.edge_tree, |k, j| test(1, me[k as usize], j));
+        for &(v, f) in &self.vf_pairs {
+            test(0, v, f);
+        }
+        for &(i, j) in &self.ee_pairs {
+            test(1, i, j);
         }
         // The traversal order is fixed, but sort anyway so the projection order is the pairs'.
         self.hits.sort_unstable_by(|x, y| (x.0, x.1, x.2).cmp(&(y.0, y.1, y.2)));
@@ -409,12 +631,12 @@ impl SelfContact {
         let mut counts = ContactCounts::default();
         self.contacts.clear();
         self.flags.fill(0);
-        counts.rebuilds += self.refit(x0, p, 0.5 * thickness);
+        counts.rebuilds += self.ensure_pairs_counted(x0, p, thickness, &mut counts);
         for round in 0..ROUNDS {
             counts.rounds += 1;
             let check = if round == 0 { thickness } else { RECHECK_FRACTION * thickness };
             if round > 0 {
-                counts.rebuilds += self.refit(x0, p, 0.5 * check);
+                counts.rebuilds += self.ensure_pairs_counted(x0, p, check, &mut counts);
             }
             self.detect(x0, p, check, round > 0, &mut counts);
             if self.hits.is_empty() {
@@ -444,7 +666,7 @@ impl SelfContact {
         // a vertex newly put back, are tested.
         loop {
             counts.rounds += 1;
-            counts.rebuilds += self.refit(x0, p, 0.0);
+            counts.rebuilds += self.ensure_pairs_counted(x0, p, 0.0, &mut counts);
             self.detect(x0, p, 0.0, true, &mut ContactCounts::default());
             for f in &mut self.flags {
                 *f &= REVERTED;
@@ -588,6 +810,83 @@ mod tests {
         for i in 4..8 {
             assert!(v[i].z <= 1e-4, "{:?}", v[i]);
         }
+    }
+
+    #[test]
+    fn cached_pairs_hold_every_pair_whose_swept_boxes_meet() {
+        // A crumpled 10 x 10 sheet moved randomly, with motions that grow and shrink so that
+        // vertices leave their reach one by one (partial refills) and all at once (full ones).
+        let mut seed = 0x1234_5678_9ABC_DEF0u64;
+        let mut unit = move || {
+            seed ^= seed >> 12;
+            seed ^= seed << 25;
+            seed ^= seed >> 27;
+            (seed.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        let n = 10;
+        let mut x: Vec<Vec3> = (0..n * n)
+            .map(|k| Vec3::new((k % n) as f32 / n as f32, (k / n) as f32 / n as f32, 0.02 * unit()))
+            .collect();
+        let mut tris = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let v = (j * n + i) as u32;
+                let n = n as u32;
+                tris.extend([[v, v + 1, v + n + 1], [v, v + n + 1, v + n]]);
+            }
+        }
+        let edges = crate::mesh::Topology::build(&tris, x.len()).edges;
+        let mut sc = SelfContact::new(&x, &edges, &tris);
+        let thickness = 0.01;
+        let (mut partial, mut full) = (0, 0);
+        for step in 0..60 {
+            let amount = [0.002, 0.02, 0.005, 0.05][step % 4] * if step % 7 == 0 { 3.0 } else { 1.0 };
+            let few = step % 3 == 1;
+            let x1: Vec<Vec3> = x
+                .iter()
+                .enumerate()
+                .map(|(v, &p)| {
+                    let s = if few && v % 17 != 0 { 0.01 } else { 1.0 };
+                    p + Vec3::new(unit(), unit(), unit()) * amount * s
+                })
+                .collect();
+            if sc.ensure_pairs(&x, &x1, thickness).is_some() {
+                if sc.escaped.len() * PARTIAL_REFILL_SHARE <= x.len() && sc.escaped.len() > 0 && step > 0 {
+                    partial += 1;
+                } else {
+                    full += 1;
+                }
+            }
+            let boxes = |prim: &[u32]| {
+                let pts: Vec<V3> = prim.iter().flat_map(|&v| [d(x[v as usize]), d(x1[v as usize])]).collect();
+                Aabb::around(&pts, 0.5 * thickness)
+            };
+            let (mut vf, mut ee) = (sc.vf_pairs.clone(), sc.ee_pairs.clone());
+            vf.sort_unstable();
+            ee.sort_unstable();
+            for v in 0..x.len() as u32 {
+                for (f, t) in tris.iter().enumerate() {
+                    if !t.contains(&v) && boxes(&[v]).overlaps(&boxes(t)) {
+                        assert!(vf.binary_search(&(v, f as u32)).is_ok(), "step {step}: ({v}, {f}) missing");
+                    }
+                }
+            }
+            for i in 0..edges.len() {
+                for j in i + 1..edges.len() {
+                    let ([a, b], [c, e]) = (edges[i], edges[j]);
+                    if a != c && a != e && b != c && b != e && boxes(&edges[i]).overlaps(&boxes(&edges[j])) {
+                        assert!(ee.binary_search(&(i as u32, j as u32)).is_ok(), "step {step}: edges {i}, {j} missing");
+                    }
+                }
+            }
+            // No pair twice.
+            let (l1, l2) = (vf.len(), ee.len());
+            vf.dedup();
+            ee.dedup();
+            assert_eq!((vf.len(), ee.len()), (l1, l2), "step {step}: duplicates");
+            x = x1;
+        }
+        assert!(partial > 3 && full >= 2, "partial {partial}, full {full}");
     }
 
     #[test]
