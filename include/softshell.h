@@ -20,9 +20,6 @@
 #define SOFTSHELL_ABI_VERSION ((SOFTSHELL_VERSION_MAJOR << 16) | (SOFTSHELL_VERSION_MINOR << 8) | SOFTSHELL_VERSION_PATCH)
 
 
-// Refitting may make the tree this much looser than when it was built before it is rebuilt.
-#define REBUILD_LOOSENESS_RATIO 1.5
-
 // Explicit Euler, `x += h v; v += h a` with the old velocity: the paper's integrator. Unstable
 // for stiff springs (`h` above about `2/omega`): such a step returns `SOFTSHELL_STATUS_UNSTABLE`.
 #define SOFTSHELL_INTEGRATOR_EXPLICIT_EULER 0

@@ -109,7 +109,7 @@ pub struct Bvh {
 }
 
 /// Refitting may make the tree this much looser than when it was built before it is rebuilt.
-pub const REBUILD_LOOSENESS_RATIO: f64 = 1.5;
+pub(crate) const REBUILD_LOOSENESS_RATIO: f64 = 1.5;
 
 impl Bvh {
     /// Builds the tree over `boxes` (primitive i has box `boxes[i]`).
