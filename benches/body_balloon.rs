@@ -56,7 +56,8 @@ fn last_error() -> String {
     unsafe { std::ffi::CStr::from_ptr(softshell::ffi::version::softshell_last_error()) }.to_string_lossy().into_owned()
 }
 
-fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usize) -> Run {
+/// A body of the mesh with `def`, through the C ABI; the caller frees it.
+fn new_body(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef) -> *mut SoftshellBody {
     let mut mesh = std::ptr::null_mut();
     let mut body: *mut SoftshellBody = std::ptr::null_mut();
     // SAFETY: live arrays, def and out-pointers.
@@ -74,6 +75,11 @@ fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usiz
         assert_eq!(softshell_body_new(mesh, def, &mut body), SoftshellStatus::Ok, "{}", last_error());
         softshell_mesh_free(mesh);
     }
+    body
+}
+
+fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usize) -> Run {
+    let body = new_body(positions, triangles, def);
     let v0 = {
         let mut s = SoftshellBodyStats::default();
         // SAFETY: live body (a zero-length step is not possible: measure with the first step's
@@ -280,27 +286,7 @@ fn crack_cost(
     cracking: &SoftshellBodyDef,
     steps: usize,
 ) -> Option<(f64, f64, f64, usize, u64)> {
-    let make = |def: &SoftshellBodyDef| {
-        let mut mesh = std::ptr::null_mut();
-        let mut body: *mut SoftshellBody = std::ptr::null_mut();
-        // SAFETY: live arrays, def and out-pointers.
-        unsafe {
-            assert_eq!(
-                softshell_mesh_from_arrays(
-                    positions.as_ptr(),
-                    positions.len() / 3,
-                    triangles.as_ptr(),
-                    triangles.len() / 3,
-                    &mut mesh
-                ),
-                SoftshellStatus::Ok
-            );
-            assert_eq!(softshell_body_new(mesh, def, &mut body), SoftshellStatus::Ok, "{}", last_error());
-            softshell_mesh_free(mesh);
-        }
-        body
-    };
-    let (a, b) = (make(plain), make(cracking));
+    let (a, b) = (new_body(positions, triangles, plain), new_body(positions, triangles, cracking));
     let timed = |body: *mut SoftshellBody| {
         let mut stats = SoftshellBodyStats::default();
         let started = Instant::now();

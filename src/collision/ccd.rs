@@ -341,21 +341,33 @@ mod tests {
             // Within half the thickness at t_star (exactly on the triangle up to rounding if 0).
             let offset = rng.vec(thickness * 0.28);
             let p = add(&on, &offset, 1.0);
-            let mut start = [[0.0; 3]; 4];
-            let mut end = [[0.0; 3]; 4];
-            for (k, point) in [p, tri[0], tri[1], tri[2]].iter().enumerate() {
-                let vel = rng.vec(scale * if case % 5 == 0 { 1e-9 } else { 1.0 });
-                (start[k], end[k]) = through(point, &vel, t_star);
-            }
+            let (start, end) = moving_through(&mut rng, [p, tri[0], tri[1], tri[2]], scale, case, t_star);
             // With zero thickness the construction is exact only up to rounding, so test with a
             // thickness that covers it (1e-12 of the scale).
             let thickness = thickness.max(1e-12 * scale);
-            for (settings, exact_time) in [(CcdSettings::default(), true), (shell_settings(), false)] {
-                let toi = vertex_triangle_with(&start, &end, thickness, &settings).toi;
-                assert!(toi.is_some(), "case {case}: contact at t = {t_star} missed");
-                // The shell's shortcut estimates the time (see `certain_contact_slack`).
-                assert!(!exact_time || toi.unwrap() <= t_star, "case {case}: toi {} after {t_star}", toi.unwrap());
-            }
+            assert_found(case, t_star, |settings| vertex_triangle_with(&start, &end, thickness, settings).toi);
+        }
+    }
+
+    /// Start and end positions of four points that each pass through the given point at
+    /// `t_star` with a random velocity (tiny on every fifth case).
+    fn moving_through(rng: &mut Rng, points: [V3; 4], scale: f64, case: usize, t_star: f64) -> ([V3; 4], [V3; 4]) {
+        let mut start = [[0.0; 3]; 4];
+        let mut end = [[0.0; 3]; 4];
+        for (k, point) in points.iter().enumerate() {
+            let vel = rng.vec(scale * if case % 5 == 0 { 1e-9 } else { 1.0 });
+            (start[k], end[k]) = through(point, &vel, t_star);
+        }
+        (start, end)
+    }
+
+    /// The query finds the contact with the standalone settings (at or before `t_star`) and with
+    /// the shell's (whose shortcut only estimates the time, see `certain_contact_slack`).
+    fn assert_found(case: usize, t_star: f64, query: impl Fn(&CcdSettings) -> Option<f64>) {
+        for (settings, exact_time) in [(CcdSettings::default(), true), (shell_settings(), false)] {
+            let toi = query(&settings);
+            assert!(toi.is_some(), "case {case}: contact at t = {t_star} missed");
+            assert!(!exact_time || toi.unwrap() <= t_star, "case {case}: toi {} after {t_star}", toi.unwrap());
         }
     }
 
@@ -380,19 +392,9 @@ mod tests {
             let meet = add(&on_ab, &rng.vec(thickness * 0.28), 1.0);
             let c = add(&meet, &dir, -v);
             let d = add(&meet, &dir, 1.0 - v);
-            let mut start = [[0.0; 3]; 4];
-            let mut end = [[0.0; 3]; 4];
-            for (k, point) in [a, b, c, d].iter().enumerate() {
-                let vel = rng.vec(scale * if case % 5 == 0 { 1e-9 } else { 1.0 });
-                (start[k], end[k]) = through(point, &vel, t_star);
-            }
+            let (start, end) = moving_through(&mut rng, [a, b, c, d], scale, case, t_star);
             let thickness = thickness.max(1e-12 * scale);
-            for (settings, exact_time) in [(CcdSettings::default(), true), (shell_settings(), false)] {
-                let toi = edge_edge_with(&start, &end, thickness, &settings).toi;
-                assert!(toi.is_some(), "case {case}: contact at t = {t_star} missed");
-                // The shell's shortcut estimates the time (see `certain_contact_slack`).
-                assert!(!exact_time || toi.unwrap() <= t_star, "case {case}: toi {} after {t_star}", toi.unwrap());
-            }
+            assert_found(case, t_star, |settings| edge_edge_with(&start, &end, thickness, settings).toi);
         }
     }
 
