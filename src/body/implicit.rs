@@ -72,8 +72,9 @@ pub(crate) struct ImplicitScratch {
     /// Per vertex, the sum of the magnitudes of the forces acting on it (springs, gas, gravity):
     /// the scale that the residual of the solve is measured against.
     magnitude: Vec<f32>,
-    /// Per fragment `h² P/V` (gas rank-one term) and a per-fragment dot product buffer.
+    /// Per fragment `h² P/V` (gas rank-one term), `Σ g·v` and a per-fragment dot product buffer.
     gas_coef: Vec<f64>,
+    gas_dot_v: Vec<f64>,
     gas_dot: Vec<f64>,
     /// Δv of the previous substep (the warm start), reset when the vertex count changes.
     previous_dv: Vec<Vec3A>,
@@ -109,7 +110,7 @@ impl ImplicitScratch {
                 * 16
             + self.contact.capacity() * std::mem::size_of::<ContactFilter>()
             + self.coupling.capacity() * std::mem::size_of::<Coupling>()
-            + (self.gas_coef.capacity() + self.gas_dot.capacity()) * 8
+            + (self.gas_coef.capacity() + self.gas_dot_v.capacity() + self.gas_dot.capacity()) * 8
             + self.magnitude.capacity() * 4
             + self.inv_diag.capacity() * std::mem::size_of::<Mat3A>()
     }
@@ -290,12 +291,12 @@ fn product(
     tasks.iter().map(|t| t.dot).sum()
 }
 
-/// `Σ g·values` per gas fragment into `out` (no gas: nothing).
-fn gas_dots(sys: &System, values: &[Vec3A], out: &mut [f64]) {
+/// `Σ g·value(i)` per gas fragment into `out` (no gas: nothing).
+fn gas_dots(sys: &System, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
     out.fill(0.0);
     for (i, g) in sys.gradient.iter().enumerate() {
         if let Some(frag) = sys.fragment(i) {
-            out[frag] += Vec3A::from(*g).dot(values[i]) as f64;
+            out[frag] += Vec3A::from(*g).dot(value(i)) as f64;
         }
     }
 }
@@ -323,7 +324,7 @@ pub(crate) fn substep(
     s.coupling.resize(model.springs.adjacency.len(), Coupling::default());
     let power = external_forces(model, x, v, &mut s.force);
     let h2 = h * h;
-    let mut gas_dot_v = Vec::new();
+    let mut gas_dot_v = std::mem::take(&mut s.gas_dot_v);
     if let Some(gas) = gas.as_deref_mut() {
         s.gradient.resize(n, Vec3::ZERO);
         add_gas_forces(model, gas, x, &mut s.gradient, &mut s.force);
@@ -347,8 +348,7 @@ pub(crate) fn substep(
         gas_coef: &s.gas_coef,
     };
     if gas.is_some() {
-        let v: Vec<Vec3A> = v.iter().map(|&v| v.into()).collect();
-        gas_dots(&sys, &v, &mut gas_dot_v);
+        gas_dots(&sys, |i| Vec3A::from(v[i]), &mut gas_dot_v);
     }
 
     // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner. Per
@@ -382,6 +382,7 @@ pub(crate) fn substep(
             }
         });
     }
+    s.gas_dot_v = gas_dot_v;
     if let Some(gas) = gas.as_deref() {
         for (i, g) in s.gradient.iter().enumerate() {
             if let Some(frag) = sys.fragment(i) {
@@ -434,7 +435,7 @@ pub(crate) fn substep(
     let any_contact = !s.contact.is_empty();
     let mut gas_dot = std::mem::take(&mut s.gas_dot);
     if gas.is_some() {
-        gas_dots(&sys, &s.dv, &mut gas_dot);
+        gas_dots(&sys, |i| s.dv[i], &mut gas_dot);
     }
     product(pool, &sys, &s.contact, &s.coupling, &s.dv, &gas_dot, &mut s.ap);
     let mut rz = 0.0f64;
@@ -451,7 +452,7 @@ pub(crate) fn substep(
     }
     s.p.copy_from_slice(&s.z);
     if gas.is_some() {
-        gas_dots(&sys, &s.p, &mut gas_dot);
+        gas_dots(&sys, |i| s.p[i], &mut gas_dot);
     }
     let force_scale = h as f64 * s.magnitude.iter().map(|&m| (m as f64) * (m as f64)).sum::<f64>().sqrt();
     let rhs_norm = s.rhs.iter().map(|r| r.length_squared() as f64).sum::<f64>().sqrt();
@@ -489,7 +490,7 @@ pub(crate) fn substep(
                 s.p[i] = s.z[i] + s.p[i] * beta;
             }
             if gas.is_some() {
-                gas_dots(&sys, &s.p, &mut gas_dot);
+                gas_dots(&sys, |i| s.p[i], &mut gas_dot);
             }
         }
     }
