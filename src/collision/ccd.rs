@@ -3,6 +3,7 @@
 //! time of impact is never later than the true first time the distance reaches the thickness.
 
 use super::filters::{V3, plane_distance_filter, sub, swept_aabbs_separated};
+use super::hull_filter::separated_piecewise;
 use super::inclusion;
 use super::self_contact::{closest_on_triangle, closest_segments};
 use glam::DVec3;
@@ -43,8 +44,16 @@ pub struct CcdSettings {
     /// therefore an estimate, not the proven first time: a second dip of the distance between
     /// the bound and the time within reach may be skipped. Only the contact's normal and weights
     /// depend on it in the shell, whose non-penetration rests on the re-checks and fail-safe of
-    /// `self_contact`, not on the time. The hit itself is never missed. `None` (the default, the
-    /// standalone queries): always searched, and the time is never later than the truth.
+    /// `self_contact`, not on the time. The hit itself is never missed.
+    /// When no sample is within reach, the same samples can prove a miss: if on every interval
+    /// between samples the hulls the two primitives sweep are apart along the gap sampled at one
+    /// of its ends (or, halving it up to four times, at a midpoint), the pair never comes within
+    /// the thickness ([`Stage::SampledSeparation`]; Euclidean distance, rounding bounded as in
+    /// the hull filter). On the kitten's contracting shell this decides 96% of the pairs the
+    /// inclusion search used to refute (and the near misses it reported as hits because it
+    /// measures the gap per axis); the search runs only for the rest.
+    /// `None` (the default, the standalone queries): always searched, and the time is never
+    /// later than the truth.
     pub certain_contact_slack: Option<f64>,
 }
 
@@ -73,6 +82,9 @@ pub enum Stage {
     /// The distance at a sample time is within the thickness (plus the slack of
     /// [`CcdSettings::certain_contact_slack`]): hit, its time estimated from below.
     SampledContact,
+    /// No sample is within the thickness and, on every sample interval, the hulls the two
+    /// primitives sweep are apart along the gap direction sampled there: no contact.
+    SampledSeparation,
     /// The inclusion search answered within its budget.
     Inclusion,
     /// The inclusion search ran out of budget: conservative hit.
@@ -110,7 +122,18 @@ fn largest_motion(start: &[V3; 4], end: &[V3; 4], range: std::ops::Range<usize>)
     range.map(|k| dv(end[k]).distance(dv(start[k]))).fold(0.0, f64::max)
 }
 
-/// The sampled estimate of [`CcdSettings::certain_contact_slack`]: None when no sample is within
+/// The gap vectors (the first primitive's closest point minus the second's) at the times
+/// `t = k / SAMPLES`.
+fn sample_gaps(start: &[V3; 4], end: &[V3; 4], gap: impl Fn(&[DVec3; 4]) -> DVec3) -> [DVec3; SAMPLES + 1] {
+    let (s, e) = (start.map(dv), end.map(dv));
+    std::array::from_fn(|k| {
+        let t = k as f64 / SAMPLES as f64;
+        gap(&std::array::from_fn(|i| s[i] + (e[i] - s[i]) * t))
+    })
+}
+
+/// The sampled estimate of [`CcdSettings::certain_contact_slack`] from the distances `d` at the
+/// times `k / SAMPLES`: None when no sample (nor a golden-section probe) is within
 /// `reach`. `speed` bounds how fast the distance can shrink: it is the minimum over the
 /// primitives' points of a gap whose time derivative is at most the sum of the two largest
 /// displacements.
@@ -120,13 +143,10 @@ fn sampled_time(
     speed: f64,
     thickness: f64,
     reach: f64,
+    d: &[f64; SAMPLES + 1],
     distance: impl Fn(&[DVec3; 4]) -> f64,
 ) -> Option<f64> {
     let (s, e) = (start.map(dv), end.map(dv));
-    let d: [f64; SAMPLES + 1] = std::array::from_fn(|k| {
-        let t = k as f64 / SAMPLES as f64;
-        distance(&std::array::from_fn(|i| s[i] + (e[i] - s[i]) * t))
-    });
     let at = |t: f64| distance(&std::array::from_fn(|i| s[i] + (e[i] - s[i]) * t));
     // `hit`: the sample ending the interval that holds `inside`, a time within reach.
     let inside;
@@ -204,6 +224,30 @@ fn sampled_time(
     Some(lo)
 }
 
+/// The sampled stage of [`CcdSettings::certain_contact_slack`] for a pair whose first
+/// `first_points` points are the first primitive: a hit when a sample comes within `reach`
+/// ([`sampled_time`]), a miss when the hulls swept over each sample interval stay apart along the
+/// sampled gaps ([`separated_piecewise`]), None (search) otherwise.
+fn sampled(
+    start: &[V3; 4],
+    end: &[V3; 4],
+    first_points: usize,
+    speed: f64,
+    thickness: f64,
+    reach: f64,
+    gap: impl Fn(&[DVec3; 4]) -> DVec3,
+) -> Option<CcdOutcome> {
+    let gaps = sample_gaps(start, end, &gap);
+    let d = gaps.map(|g| g.length());
+    if let Some(toi) = sampled_time(start, end, speed, thickness, reach, &d, |x| gap(x).length()) {
+        return Some(CcdOutcome { toi: Some(toi), stage: Stage::SampledContact, boxes: 0 });
+    }
+    if separated_piecewise(start, end, first_points, &gaps, thickness, |x| gap(&x.map(dv))) {
+        return Some(CcdOutcome::filtered(Stage::SampledSeparation));
+    }
+    None
+}
+
 fn from_search(search: inclusion::Search) -> CcdOutcome {
     let stage = if search.exhausted { Stage::BudgetExhausted } else { Stage::Inclusion };
     CcdOutcome { toi: search.toi, stage, boxes: search.boxes }
@@ -234,14 +278,14 @@ pub fn vertex_triangle_with(start: &[V3; 4], end: &[V3; 4], thickness: f64, sett
         return CcdOutcome::filtered(Stage::PlaneFilter);
     }
     if let Some(slack) = settings.certain_contact_slack {
-        let distance = |x: &[DVec3; 4]| {
+        let gap = |x: &[DVec3; 4]| {
             let [p, a, b, c] = *x;
             let al = closest_on_triangle(p, a, b, c);
-            (p - (a * al[0] + b * al[1] + c * al[2])).length()
+            p - (a * al[0] + b * al[1] + c * al[2])
         };
         let speed = largest_motion(start, end, 0..1) + largest_motion(start, end, 1..4);
-        if let Some(toi) = sampled_time(start, end, speed, thickness, thickness * (1.0 + slack), distance) {
-            return CcdOutcome { toi: Some(toi), stage: Stage::SampledContact, boxes: 0 };
+        if let Some(stage) = sampled(start, end, 1, speed, thickness, thickness * (1.0 + slack), gap) {
+            return stage;
         }
     }
     from_search(inclusion::vertex_triangle(start, end, thickness, settings.relative_tolerance, settings.max_boxes))
@@ -272,14 +316,14 @@ pub fn edge_edge_with(start: &[V3; 4], end: &[V3; 4], thickness: f64, settings: 
         return CcdOutcome::filtered(Stage::PlaneFilter);
     }
     if let Some(slack) = settings.certain_contact_slack {
-        let distance = |x: &[DVec3; 4]| {
+        let gap = |x: &[DVec3; 4]| {
             let [a, b, c, d] = *x;
             let (s, t) = closest_segments(a, b, c, d);
-            ((a + (b - a) * s) - (c + (d - c) * t)).length()
+            (a + (b - a) * s) - (c + (d - c) * t)
         };
         let speed = largest_motion(start, end, 0..2) + largest_motion(start, end, 2..4);
-        if let Some(toi) = sampled_time(start, end, speed, thickness, thickness * (1.0 + slack), distance) {
-            return CcdOutcome { toi: Some(toi), stage: Stage::SampledContact, boxes: 0 };
+        if let Some(stage) = sampled(start, end, 2, speed, thickness, thickness * (1.0 + slack), gap) {
+            return stage;
         }
     }
     from_search(inclusion::edge_edge(start, end, thickness, settings.relative_tolerance, settings.max_boxes))
