@@ -51,6 +51,12 @@ impl Aabb {
         (0..3).all(|k| self.min[k] <= p[k] && p[k] <= self.max[k])
     }
 
+    /// Whether the closed box holds the whole of `other` (exact comparisons; false for NaN).
+    #[inline]
+    pub fn contains_box(&self, other: &Aabb) -> bool {
+        (0..3).all(|k| self.min[k] <= other.min[k] && other.max[k] <= self.max[k])
+    }
+
     /// The smallest box holding both.
     #[inline]
     pub fn union(&self, other: &Aabb) -> Aabb {
@@ -104,6 +110,10 @@ pub struct Bvh {
     leaf_boxes: Vec<Aabb>,
     /// Inverse of `order`: primitive i is at `order[slot[i]]`.
     slot: Vec<u32>,
+    /// Per node: its parent (the root's is `u32::MAX`).
+    parent: Vec<u32>,
+    /// Per primitive: the leaf node holding it.
+    leaf_of: Vec<u32>,
     /// Looseness (see [`Bvh::looseness`]) right after the last build.
     built_looseness: f64,
 }
@@ -119,6 +129,8 @@ impl Bvh {
             order: (0..boxes.len() as u32).collect(),
             leaf_boxes: boxes.clone(),
             slot: (0..boxes.len() as u32).collect(),
+            parent: Vec::new(),
+            leaf_of: vec![0; boxes.len()],
             boxes,
             built_looseness: 0.0,
         };
@@ -150,6 +162,18 @@ impl Bvh {
             self.nodes.reserve(2 * self.boxes.len() / LEAF_SIZE + 1);
             let count = self.boxes.len();
             self.build_node(0, count);
+        }
+        self.parent.clear();
+        self.parent.resize(self.nodes.len(), u32::MAX);
+        for (n, node) in self.nodes.iter().enumerate() {
+            if node.leaf {
+                for &i in &self.order[node.a as usize..node.b as usize] {
+                    self.leaf_of[i as usize] = n as u32;
+                }
+            } else {
+                self.parent[node.a as usize] = n as u32;
+                self.parent[node.b as usize] = n as u32;
+            }
         }
         self.sort_leaf_boxes();
         self.built_looseness = self.looseness();
@@ -215,14 +239,26 @@ impl Bvh {
     }
 
     /// Replaces the boxes of the primitives `changed` by theirs in `boxes` (indexed by primitive)
-    /// and refits every node, without the looseness check of [`Bvh::update`] (for a few changed
-    /// boxes between full updates).
+    /// and grows the nodes above them to hold the new boxes, without the looseness check of
+    /// [`Bvh::update`] (for a few changed boxes between full updates). Costs the changed
+    /// primitives' depth, not the tree's size: nodes are only grown (a node keeps the space a
+    /// primitive left until the next [`Bvh::update`]), so every node still holds its primitives'
+    /// boxes, which is all a traversal needs.
     pub fn update_some(&mut self, changed: &[u32], boxes: &[Aabb]) {
         for &i in changed {
-            self.boxes[i as usize] = boxes[i as usize];
-            self.leaf_boxes[self.slot[i as usize] as usize] = boxes[i as usize];
+            let b = boxes[i as usize];
+            self.boxes[i as usize] = b;
+            self.leaf_boxes[self.slot[i as usize] as usize] = b;
+            let mut n = self.leaf_of[i as usize];
+            while n != u32::MAX {
+                let node = &mut self.nodes[n as usize];
+                if node.aabb.contains_box(&b) {
+                    break; // and so do its ancestors
+                }
+                node.aabb = node.aabb.union(&b);
+                n = self.parent[n as usize];
+            }
         }
-        self.refit_nodes();
     }
 
     fn refit_nodes(&mut self) {
@@ -322,6 +358,64 @@ impl Bvh {
                     }
                 }
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn overlaps_brute(a: &[Aabb], b: &[Aabb]) -> Vec<(u32, u32)> {
+        let mut out = Vec::new();
+        for (i, x) in a.iter().enumerate() {
+            for (j, y) in b.iter().enumerate() {
+                if x.overlaps(y) {
+                    out.push((i as u32, j as u32));
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn partial_updates_keep_every_overlap() {
+        let mut seed = 0x2545_F491_4F6C_DD1Du64;
+        let mut unit = move || {
+            seed ^= seed >> 12;
+            seed ^= seed << 25;
+            seed ^= seed >> 27;
+            (seed.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut random_box = |size: f64| {
+            let c = [unit(), unit(), unit()];
+            Aabb::around(&[c, [c[0] + size * unit(), c[1] + size * unit(), c[2] + size * unit()]], 0.0)
+        };
+        let mut boxes: Vec<Aabb> = (0..300).map(|_| random_box(0.1)).collect();
+        let probes: Vec<Aabb> = (0..50).map(|_| random_box(0.2)).collect();
+        let mut tree = Bvh::build(boxes.clone());
+        let probe_tree = Bvh::build(probes.clone());
+        for round in 0..20 {
+            // Move a few boxes far (partial update), or all of them (full update).
+            if round % 5 == 4 {
+                boxes.iter_mut().for_each(|b| *b = random_box(0.1));
+                tree.update(&boxes);
+            } else {
+                let changed: Vec<u32> = (0..300).filter(|i| (i * 7 + round) % 23 == 0).collect();
+                for &i in &changed {
+                    boxes[i as usize] = random_box(0.1);
+                }
+                tree.update_some(&changed, &boxes);
+            }
+            let mut found = Vec::new();
+            tree.for_each_overlap(&probe_tree, |i, j| found.push((i, j)));
+            found.sort_unstable();
+            assert_eq!(found, overlaps_brute(&boxes, &probes), "round {round}");
+            let mut own = Vec::new();
+            tree.for_each_self_overlap(|i, j| own.push((i, j)));
+            own.sort_unstable();
+            let brute: Vec<(u32, u32)> = overlaps_brute(&boxes, &boxes).into_iter().filter(|(i, j)| i < j).collect();
+            assert_eq!(own, brute, "round {round}");
         }
     }
 }

@@ -20,11 +20,11 @@
 // NaN must fail every guard below, so comparisons are written `!(x > limit)` on purpose.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec3, Vec3A};
 
 use super::bvh::{Aabb, Bvh};
 use super::ccd::{CcdSettings, Stage, edge_edge_with, vertex_triangle_with};
-use super::filters::{V3, swept_aabbs_separated};
+use super::filters::V3;
 use super::hull_filter::{edge_edge_hulls_separated, vertex_triangle_hulls_separated};
 
 /// Projection rounds (projection, then re-check of the moved pairs) before the fail-safe.
@@ -113,10 +113,20 @@ pub struct SelfContact {
     pairs_thickness: f64,
     /// Vertices that left their reach (scratch of [`SelfContact::ensure_pairs`]).
     escaped: Vec<u32>,
+    /// The edges and the faces of each vertex (CSR: those of v are at `[start[v], start[v+1])`),
+    /// so that a partial refill finds the primitives of the escaped vertices without a pass
+    /// over the mesh.
+    vertex_edges: (Vec<u32>, Vec<u32>),
+    vertex_faces: (Vec<u32>, Vec<u32>),
     /// Per vertex, edge, face: touched by an escaped vertex (scratch, all false between calls).
     dirty_vertex: Vec<bool>,
     dirty_edge: Vec<bool>,
     dirty_face: Vec<bool>,
+    /// Per vertex, edge, face: the box swept over the step being resolved (see
+    /// [`SelfContact::update_swept_boxes`]).
+    vertex_swept: Vec<SweptBox>,
+    edge_swept: Vec<SweptBox>,
+    face_swept: Vec<SweptBox>,
     /// Per vertex: bit 0 = moved by the last projection round, bit 1 = put back by the fail-safe.
     flags: Vec<u8>,
     contacts: Vec<Contact>,
@@ -167,6 +177,66 @@ fn fill_boxes<const N: usize>(x0: &[Vec3], x1: &[Vec3], prims: &[[u32; N]], half
         }
         *b = Aabb::around(&points[..2 * N], half);
     }
+}
+
+/// The box a primitive sweeps over the step: the exact bounds of its f32 positions at both ends.
+#[derive(Clone, Copy, Debug)]
+struct SweptBox {
+    lo: Vec3A,
+    hi: Vec3A,
+}
+
+impl SweptBox {
+    const EMPTY: SweptBox = SweptBox { lo: Vec3A::INFINITY, hi: Vec3A::NEG_INFINITY };
+
+    fn of_vertex(a: Vec3, b: Vec3) -> SweptBox {
+        let (a, b) = (Vec3A::from(a), Vec3A::from(b));
+        SweptBox { lo: a.min(b), hi: a.max(b) }
+    }
+
+    fn union(self, other: &SweptBox) -> SweptBox {
+        SweptBox { lo: self.lo.min(other.lo), hi: self.hi.max(other.hi) }
+    }
+
+    /// Whether the boxes are more than the thickness `margin` apart on some axis, `margin` from
+    /// [`swept_margin`]. Exact enough: a difference of two f32 values is computed within a
+    /// relative 2^-24, so a computed gap above `margin` (the thickness rounded up by 2^-20 or
+    /// more) means an exact gap above the thickness, and a NaN compares false ("maybe"). Only
+    /// pairs within 2^-20 of the thickness on every separating axis are kept where the f64 test of
+    /// [`super::filters::swept_aabbs_separated`] would drop them.
+    #[inline]
+    fn separated(&self, other: &SweptBox, margin: Vec3A) -> bool {
+        ((other.lo - self.hi).cmpgt(margin) | (self.lo - other.hi).cmpgt(margin)).any()
+    }
+}
+
+/// The f32 margin for [`SweptBox::separated`]: `thickness` rounded up (infinite when it does not
+/// fit in an f32, so that nothing is separated).
+fn swept_margin(thickness: f64) -> Vec3A {
+    let m = (thickness * (1.0 + 1.0 / (1u64 << 20) as f64)) as f32;
+    Vec3A::splat(if m.is_finite() { m } else { f32::INFINITY })
+}
+
+/// The primitives of each of `n` vertices, as (start, list) in CSR form.
+fn incidence<const N: usize>(n: usize, prims: &[[u32; N]]) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; n + 1];
+    for prim in prims {
+        for &v in prim {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for v in 0..n {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut list = vec![0u32; start[n] as usize];
+    for (i, prim) in prims.iter().enumerate() {
+        for &v in prim {
+            list[fill[v as usize] as usize] = i as u32;
+            fill[v as usize] += 1;
+        }
+    }
+    (start, list)
 }
 
 /// Closest point of `p` on triangle `abc`: barycentric weights (α_a, α_b, α_c) (Ericson,
@@ -281,9 +351,14 @@ impl SelfContact {
             ee_pairs: Vec::with_capacity(edges.len() + 64),
             pairs_thickness: f64::NAN,
             escaped: Vec::with_capacity(x.len()),
+            vertex_edges: incidence(x.len(), edges),
+            vertex_faces: incidence(x.len(), triangles),
             dirty_vertex: vec![false; x.len()],
             dirty_edge: vec![false; edges.len()],
             dirty_face: vec![false; triangles.len()],
+            vertex_swept: vec![SweptBox::EMPTY; x.len()],
+            edge_swept: vec![SweptBox::EMPTY; edges.len()],
+            face_swept: vec![SweptBox::EMPTY; triangles.len()],
             flags: vec![0; x.len()],
             contacts: Vec::with_capacity(reserve),
             hits: Vec::with_capacity(reserve),
@@ -318,9 +393,16 @@ impl SelfContact {
             + b(&self.vf_pairs)
             + b(&self.ee_pairs)
             + b(&self.escaped)
+            + b(&self.vertex_edges.0)
+            + b(&self.vertex_edges.1)
+            + b(&self.vertex_faces.0)
+            + b(&self.vertex_faces.1)
             + b(&self.dirty_vertex)
             + b(&self.dirty_edge)
             + b(&self.dirty_face)
+            + b(&self.vertex_swept)
+            + b(&self.edge_swept)
+            + b(&self.face_swept)
             + b(&self.flags)
             + b(&self.contacts)
             + b(&self.hits)
@@ -406,29 +488,33 @@ impl SelfContact {
             self.reach[v] = reach_box(x0[v], x1[v], REACH_OWN * motion(v) + REACH_SHARED * largest + thickness);
             self.dirty_vertex[v] = true;
         }
-        let (reach, dirty) = (&self.reach, &self.dirty_vertex);
+        let reach = &self.reach;
         let union = |prim: &[u32]| prim.iter().fold(Aabb::EMPTY, |acc, &v| acc.union(&reach[v as usize])).grown(half);
-        let touched = |prim: &[u32]| prim.iter().any(|&v| dirty[v as usize]);
         let (mut mv, mut me, mut mf) = (Vec::new(), Vec::new(), Vec::new());
         for &v in &self.escaped {
             self.vertex_boxes[v as usize] = union(&[v]);
             mv.push(v);
-        }
-        for (e, prim) in self.edges.iter().enumerate() {
-            if touched(prim) {
-                self.edge_boxes[e] = union(prim);
-                self.dirty_edge[e] = true;
-                me.push(e as u32);
+            let (es, el) = &self.vertex_edges;
+            for &e in &el[es[v as usize] as usize..es[v as usize + 1] as usize] {
+                if !self.dirty_edge[e as usize] {
+                    self.dirty_edge[e as usize] = true;
+                    self.edge_boxes[e as usize] = union(&self.edges[e as usize]);
+                    me.push(e);
+                }
+            }
+            let (fs, fl) = &self.vertex_faces;
+            for &f in &fl[fs[v as usize] as usize..fs[v as usize + 1] as usize] {
+                if !self.dirty_face[f as usize] {
+                    self.dirty_face[f as usize] = true;
+                    self.face_boxes[f as usize] = union(&self.triangles[f as usize]);
+                    mf.push(f);
+                }
             }
         }
-        for (f, prim) in self.triangles.iter().enumerate() {
-            if touched(prim) {
-                self.face_boxes[f] = union(prim);
-                self.dirty_face[f] = true;
-                mf.push(f as u32);
-            }
-        }
-        // Refit only: the full refills check the trees' looseness.
+        // Fixed order (the traversal order follows it): as a pass over the mesh would list them.
+        me.sort_unstable();
+        mf.sort_unstable();
+        // Grow the nodes above them only: the full refills refit and check the trees' looseness.
         self.vertex_tree.update_some(&mv, &self.vertex_boxes);
         self.edge_tree.update_some(&me, &self.edge_boxes);
         self.face_tree.update_some(&mf, &self.face_boxes);
@@ -484,8 +570,49 @@ impl SelfContact {
     /// Finds the pairs that may come within `thickness` over `x0 -> x1` into `self.hits`.
     /// With `only_moved`, only pairs with a vertex flagged MOVED are tested; pairs whose four
     /// vertices were all put back are skipped (they do not move).
+    /// Sets the swept boxes over `x0 -> x1` of every primitive, or with `only_moved` of the
+    /// primitives of the vertices flagged MOVED (the only ones whose positions changed since).
+    fn update_swept_boxes(&mut self, x0: &[Vec3], x1: &[Vec3], only_moved: bool) {
+        if !only_moved {
+            for (v, b) in self.vertex_swept.iter_mut().enumerate() {
+                *b = SweptBox::of_vertex(x0[v], x1[v]);
+            }
+            let vb = &self.vertex_swept;
+            for (e, b) in self.edges.iter().zip(self.edge_swept.iter_mut()) {
+                *b = vb[e[0] as usize].union(&vb[e[1] as usize]);
+            }
+            for (t, b) in self.triangles.iter().zip(self.face_swept.iter_mut()) {
+                *b = vb[t[0] as usize].union(&vb[t[1] as usize]).union(&vb[t[2] as usize]);
+            }
+            return;
+        }
+        for v in 0..x0.len() {
+            if self.flags[v] & MOVED != 0 {
+                self.vertex_swept[v] = SweptBox::of_vertex(x0[v], x1[v]);
+            }
+        }
+        let ((es, el), (fs, fl)) = (&self.vertex_edges, &self.vertex_faces);
+        let vb = &self.vertex_swept;
+        for v in 0..x0.len() {
+            if self.flags[v] & MOVED == 0 {
+                continue;
+            }
+            for &e in &el[es[v] as usize..es[v + 1] as usize] {
+                let [a, b] = self.edges[e as usize];
+                self.edge_swept[e as usize] = vb[a as usize].union(&vb[b as usize]);
+            }
+            for &f in &fl[fs[v] as usize..fs[v + 1] as usize] {
+                let [a, b, c] = self.triangles[f as usize];
+                self.face_swept[f as usize] = vb[a as usize].union(&vb[b as usize]).union(&vb[c as usize]);
+            }
+        }
+    }
+
     fn detect(&mut self, x0: &[Vec3], x1: &[Vec3], thickness: f64, only_moved: bool, counts: &mut ContactCounts) {
         self.hits.clear();
+        self.update_swept_boxes(x0, x1, only_moved);
+        let margin = swept_margin(thickness);
+        let (vb, eb, fb) = (&self.vertex_swept, &self.edge_swept, &self.face_swept);
         let (tris, edges, flags, settings) = (&self.triangles, &self.edges, &self.flags, &self.settings);
         let hits = &mut self.hits;
         let first = !only_moved;
@@ -513,19 +640,16 @@ impl SelfContact {
             if kind == 0 {
                 let (v, f) = (i, j);
                 let t = tris[f as usize];
+                // The cached pairs are a superset: the swept boxes decide who is a candidate.
+                // (Flags first when most pairs are not wanted.)
+                if only_moved && !wanted([v, t[0], t[1], t[2]]) || vb[v as usize].separated(&fb[f as usize], margin) {
+                    return;
+                }
                 if t.contains(&v) || !wanted([v, t[0], t[1], t[2]]) {
                     return;
                 }
                 let start = [d(x0[v as usize]), d(x0[t[0] as usize]), d(x0[t[1] as usize]), d(x0[t[2] as usize])];
                 let end = [d(x1[v as usize]), d(x1[t[0] as usize]), d(x1[t[1] as usize]), d(x1[t[2] as usize])];
-                // The cached pairs are a superset: the swept boxes decide who is a candidate.
-                if swept_aabbs_separated(
-                    &[start[0], end[0]],
-                    &[start[1], start[2], start[3], end[1], end[2], end[3]],
-                    thickness,
-                ) {
-                    return;
-                }
                 if vertex_triangle_hulls_separated(&start, &end, thickness) {
                     tally(None);
                     return;
@@ -538,18 +662,14 @@ impl SelfContact {
             } else {
                 let (i, j) = (i.min(j), i.max(j));
                 let ([a, b], [c, e]) = (edges[i as usize], edges[j as usize]);
+                if only_moved && !wanted([a, b, c, e]) || eb[i as usize].separated(&eb[j as usize], margin) {
+                    return;
+                }
                 if a == c || a == e || b == c || b == e || !wanted([a, b, c, e]) {
                     return;
                 }
                 let start = [d(x0[a as usize]), d(x0[b as usize]), d(x0[c as usize]), d(x0[e as usize])];
                 let end = [d(x1[a as usize]), d(x1[b as usize]), d(x1[c as usize]), d(x1[e as usize])];
-                if swept_aabbs_separated(
-                    &[start[0], start[1], end[0], end[1]],
-                    &[start[2], start[3], end[2], end[3]],
-                    thickness,
-                ) {
-                    return;
-                }
                 if edge_edge_hulls_separated(&start, &end, thickness) {
                     tally(None);
                     return;
@@ -890,6 +1010,23 @@ mod tests {
             x = x1;
         }
         assert!(partial > 3 && full >= 2, "partial {partial}, full {full}");
+    }
+
+    #[test]
+    fn swept_boxes_separate_only_beyond_the_thickness() {
+        let a = SweptBox::of_vertex(Vec3::ZERO, Vec3::new(1.0, 0.0, 0.0));
+        let b = |x: f32| SweptBox::of_vertex(Vec3::new(x, 0.0, 0.0), Vec3::new(x, 1.0, 0.0));
+        let t = 0.25;
+        assert!(!a.separated(&b(1.25), swept_margin(t)), "exactly the thickness apart");
+        assert!(!b(1.25).separated(&a, swept_margin(t)));
+        assert!(a.separated(&b(1.26), swept_margin(t)));
+        assert!(b(-0.26).separated(&a, swept_margin(t)));
+        assert!(!a.separated(&b(1.26), swept_margin(f64::MAX)), "a thickness beyond f32 separates nothing");
+        let nan = SweptBox::of_vertex(Vec3::splat(f32::NAN), Vec3::splat(f32::NAN));
+        assert!(!a.separated(&nan, swept_margin(t)) && !nan.separated(&a, swept_margin(t)));
+        // The union holds both.
+        let u = a.union(&b(3.0));
+        assert_eq!((u.lo, u.hi), (Vec3A::ZERO, Vec3A::new(3.0, 1.0, 0.0)));
     }
 
     #[test]
