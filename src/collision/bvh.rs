@@ -328,6 +328,31 @@ impl Bvh {
         }
     }
 
+    /// Calls `f(j)` for every primitive `j` whose box overlaps `query`, in a fixed order.
+    pub fn for_each_overlap_of(&self, query: &Aabb, stack: &mut Vec<u32>, mut f: impl FnMut(u32)) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let q = Box32::around(query);
+        stack.clear();
+        stack.push(0);
+        while let Some(n) = stack.pop() {
+            let node = &self.nodes[n as usize];
+            if !node.aabb.overlaps(&q) {
+                continue;
+            }
+            if node.leaf {
+                for k in node.a as usize..node.b as usize {
+                    if self.leaf_boxes32[k].overlaps(&q) && self.leaf_boxes[k].overlaps(query) {
+                        f(self.order[k]);
+                    }
+                }
+            } else {
+                stack.extend([node.b, node.a]);
+            }
+        }
+    }
+
     /// Calls `f(i, j)` for every primitive `i` of `self` and `j` of `other` whose boxes overlap.
     pub fn for_each_overlap(&self, other: &Bvh, mut f: impl FnMut(u32, u32)) {
         if self.nodes.is_empty() || other.nodes.is_empty() {
@@ -470,6 +495,13 @@ mod tests {
             tree.for_each_overlap(&probe_tree, |i, j| found.push((i, j)));
             found.sort_unstable();
             assert_eq!(found, overlaps_brute(&boxes, &probes), "round {round}");
+            let mut one_by_one = Vec::new();
+            let mut stack = Vec::new();
+            for (j, p) in probes.iter().enumerate() {
+                tree.for_each_overlap_of(p, &mut stack, |i| one_by_one.push((i, j as u32)));
+            }
+            one_by_one.sort_unstable();
+            assert_eq!(one_by_one, found, "round {round}");
             let mut own = Vec::new();
             tree.for_each_self_overlap(|i, j| own.push((i, j)));
             own.sort_unstable();
