@@ -157,6 +157,10 @@ pub struct Bvh {
     leaf_boxes32: Vec<Box32>,
     /// Inverse of `order`: primitive i is at `order[slot[i]]`.
     slot: Vec<u32>,
+    /// Per primitive, optional (empty when none were given, see [`Bvh::build_with_keys`]): up to
+    /// three keys; the traversals skip pairs sharing a key. In `order`'s order in `leaf_keys`.
+    keys: Vec<[u32; 3]>,
+    leaf_keys: Vec<[u32; 3]>,
     /// Per node: its parent (the root's is `u32::MAX`).
     parent: Vec<u32>,
     /// Per primitive: the leaf node holding it.
@@ -171,7 +175,18 @@ pub(crate) const REBUILD_LOOSENESS_RATIO: f64 = 1.5;
 impl Bvh {
     /// Builds the tree over `boxes` (primitive i has box `boxes[i]`).
     pub fn build(boxes: Vec<Aabb>) -> Bvh {
+        Self::build_with_keys(boxes, Vec::new())
+    }
+
+    /// Builds the tree over `boxes` with a key triple per primitive (repeat a key to give fewer,
+    /// e.g. a mesh edge's two vertices as `[a, b, a]`): the traversals then never report two
+    /// primitives that share a key (mesh neighbours sharing a vertex), without testing their
+    /// exact boxes or calling back. `keys` empty: no skipping.
+    pub fn build_with_keys(boxes: Vec<Aabb>, keys: Vec<[u32; 3]>) -> Bvh {
+        assert!(keys.is_empty() || keys.len() == boxes.len(), "one key triple per primitive");
         let mut bvh = Bvh {
+            leaf_keys: keys.clone(),
+            keys,
             nodes: Vec::new(),
             order: (0..boxes.len() as u32).collect(),
             leaf_boxes: boxes.clone(),
@@ -263,6 +278,9 @@ impl Bvh {
             *b = self.boxes[i as usize];
             self.leaf_boxes32[k] = Box32::around(b);
             self.slot[i as usize] = k as u32;
+            if !self.keys.is_empty() {
+                self.leaf_keys[k] = self.keys[i as usize];
+            }
         }
     }
 
@@ -328,6 +346,16 @@ impl Bvh {
         }
     }
 
+    /// Whether leaf slots `k` of `self` and `l` of `other` share a key (never without keys).
+    #[inline(always)]
+    fn share_key(&self, k: usize, other: &Bvh, l: usize) -> bool {
+        if self.leaf_keys.is_empty() || other.leaf_keys.is_empty() {
+            return false;
+        }
+        let (a, b) = (&self.leaf_keys[k], &other.leaf_keys[l]);
+        a.iter().any(|x| b.contains(x))
+    }
+
     /// Calls `f(j)` for every primitive `j` whose box overlaps `query`, in a fixed order.
     pub fn for_each_overlap_of(&self, query: &Aabb, stack: &mut Vec<u32>, mut f: impl FnMut(u32)) {
         if self.nodes.is_empty() {
@@ -353,7 +381,8 @@ impl Bvh {
         }
     }
 
-    /// Calls `f(i, j)` for every primitive `i` of `self` and `j` of `other` whose boxes overlap.
+    /// Calls `f(i, j)` for every primitive `i` of `self` and `j` of `other` whose boxes overlap
+    /// (and share no key, when both trees have keys).
     pub fn for_each_overlap(&self, other: &Bvh, mut f: impl FnMut(u32, u32)) {
         if self.nodes.is_empty() || other.nodes.is_empty() {
             return;
@@ -369,7 +398,9 @@ impl Bvh {
                     for k in nx.a as usize..nx.b as usize {
                         let bk = &self.leaf_boxes32[k];
                         for l in ny.a as usize..ny.b as usize {
-                            if bk.overlaps(&other.leaf_boxes32[l]) && self.leaf_boxes[k].overlaps(&other.leaf_boxes[l])
+                            if bk.overlaps(&other.leaf_boxes32[l])
+                                && !self.share_key(k, other, l)
+                                && self.leaf_boxes[k].overlaps(&other.leaf_boxes[l])
                             {
                                 f(self.order[k], other.order[l]);
                             }
@@ -390,7 +421,8 @@ impl Bvh {
         }
     }
 
-    /// Calls `f(i, j)` with `i < j` once for every pair of primitives whose boxes overlap.
+    /// Calls `f(i, j)` with `i < j` once for every pair of primitives whose boxes overlap (and
+    /// share no key, when the tree has keys).
     pub fn for_each_self_overlap(&self, mut f: impl FnMut(u32, u32)) {
         if self.nodes.is_empty() {
             return;
@@ -404,6 +436,7 @@ impl Bvh {
                     for k in nx.a as usize..nx.b as usize {
                         for l in k + 1..nx.b as usize {
                             if self.leaf_boxes32[k].overlaps(&self.leaf_boxes32[l])
+                                && !self.share_key(k, self, l)
                                 && self.leaf_boxes[k].overlaps(&self.leaf_boxes[l])
                             {
                                 let (i, j) = (self.order[k], self.order[l]);
@@ -425,7 +458,10 @@ impl Bvh {
                     for k in nx.a as usize..nx.b as usize {
                         let bk = &self.leaf_boxes32[k];
                         for l in ny.a as usize..ny.b as usize {
-                            if bk.overlaps(&self.leaf_boxes32[l]) && self.leaf_boxes[k].overlaps(&self.leaf_boxes[l]) {
+                            if bk.overlaps(&self.leaf_boxes32[l])
+                                && !self.share_key(k, self, l)
+                                && self.leaf_boxes[k].overlaps(&self.leaf_boxes[l])
+                            {
                                 let (i, j) = (self.order[k], self.order[l]);
                                 f(i.min(j), i.max(j));
                             }
@@ -508,6 +544,28 @@ mod tests {
             let brute: Vec<(u32, u32)> = overlaps_brute(&boxes, &boxes).into_iter().filter(|(i, j)| i < j).collect();
             assert_eq!(own, brute, "round {round}");
         }
+    }
+
+    #[test]
+    fn primitives_sharing_a_key_are_never_paired() {
+        // Unit boxes on a line, each overlapping its neighbours; keys make neighbours k, k+1
+        // share key k+1 (like consecutive edges of a polyline sharing a vertex).
+        let boxes: Vec<Aabb> = (0..40).map(|k| Aabb::around(&[[k as f64 * 0.4, 0.0, 0.0]], 0.5)).collect();
+        let keys: Vec<[u32; 3]> = (0..40u32).map(|k| [k, k + 1, k]).collect();
+        let plain = Bvh::build(boxes.clone());
+        let keyed = Bvh::build_with_keys(boxes.clone(), keys.clone());
+        let (mut all, mut kept) = (Vec::new(), Vec::new());
+        plain.for_each_self_overlap(|i, j| all.push((i, j)));
+        keyed.for_each_self_overlap(|i, j| kept.push((i, j)));
+        all.sort_unstable();
+        kept.sort_unstable();
+        let expected: Vec<(u32, u32)> = all.iter().copied().filter(|&(i, j)| j != i + 1).collect();
+        assert!(all.len() > expected.len() && !expected.is_empty());
+        assert_eq!(kept, expected);
+        let mut across = Vec::new();
+        keyed.for_each_overlap(&Bvh::build_with_keys(boxes, keys), |i, j| across.push((i, j)));
+        assert!(across.iter().all(|&(i, j)| i != j && i != j + 1 && j != i + 1));
+        assert_eq!(across.len(), 2 * expected.len());
     }
 
     #[test]

@@ -111,6 +111,8 @@ pub struct SelfContact {
     ee_pairs: Vec<(u32, u32)>,
     /// The thickness the cached pairs were found for; NaN when there are none.
     pairs_thickness: f64,
+    /// The start positions of the step before (for the reach boxes' acceleration).
+    before: Vec<Vec3>,
     /// Vertices that left their reach (scratch of [`SelfContact::ensure_pairs`]).
     escaped: Vec<u32>,
     /// Scratch of the BVH queries of a partial refill.
@@ -149,9 +151,13 @@ const REACH_OWN: f64 = 0.5;
 const REACH_SHARED: f64 = 0.1;
 
 /// The reach box of a vertex moving from `x0` to `x1` (see [`REACH_AHEAD`]).
-fn reach_box(x0: Vec3, x1: Vec3, margin: f64) -> Aabb {
-    let ahead = x1 + (x1 - x0) * REACH_AHEAD;
-    Aabb::around(&[d(x0), d(x1), d(ahead)], margin)
+fn reach_box(before: Vec3, x0: Vec3, x1: Vec3, margin: f64) -> Aabb {
+    let motion = x1 - x0;
+    let ahead = x1 + motion * REACH_AHEAD;
+    // With the change of motion since the step before, carried on as a constant acceleration.
+    let change = motion - (x0 - before);
+    let accelerated = ahead + change * (0.5 * REACH_AHEAD * (REACH_AHEAD + 1.0));
+    Aabb::around(&[d(x0), d(x1), d(ahead), d(accelerated)], margin)
 }
 /// When at most 1/this of the vertices left their reach, only their pairs are found again (kitten
 /// bench: 1/6 was at least as fast as 1/3, 1/10 and 1/20; escapes mostly come all at once).
@@ -342,9 +348,10 @@ impl SelfContact {
         Self {
             edges: edges.to_vec(),
             triangles: triangles.to_vec(),
-            vertex_tree: Bvh::build(vertex_boxes.clone()),
-            edge_tree: Bvh::build(edge_boxes.clone()),
-            face_tree: Bvh::build(face_boxes.clone()),
+            // Keys: the vertices, so that neighbours sharing one are skipped in the traversals.
+            vertex_tree: Bvh::build_with_keys(vertex_boxes.clone(), (0..x.len() as u32).map(|v| [v; 3]).collect()),
+            edge_tree: Bvh::build_with_keys(edge_boxes.clone(), edges.iter().map(|&[a, b]| [a, b, a]).collect()),
+            face_tree: Bvh::build_with_keys(face_boxes.clone(), triangles.to_vec()),
             vertex_boxes,
             edge_boxes,
             face_boxes,
@@ -355,6 +362,7 @@ impl SelfContact {
             pairs_thickness: f64::NAN,
             escaped: Vec::with_capacity(x.len()),
             query_stack: Vec::with_capacity(64),
+            before: x.to_vec(),
             vertex_edges: incidence(x.len(), edges),
             vertex_faces: incidence(x.len(), triangles),
             dirty_vertex: vec![false; x.len()],
@@ -398,6 +406,7 @@ impl SelfContact {
             + b(&self.ee_pairs)
             + b(&self.escaped)
             + b(&self.query_stack)
+            + b(&self.before)
             + b(&self.vertex_edges.0)
             + b(&self.vertex_edges.1)
             + b(&self.vertex_faces.0)
@@ -442,7 +451,8 @@ impl SelfContact {
         }
         let largest = (0..n).map(motion).fold(0.0, f64::max);
         for v in 0..n {
-            self.reach[v] = reach_box(x0[v], x1[v], REACH_OWN * motion(v) + REACH_SHARED * largest + thickness);
+            self.reach[v] =
+                reach_box(self.before[v], x0[v], x1[v], REACH_OWN * motion(v) + REACH_SHARED * largest + thickness);
         }
         let half = 0.5 * thickness;
         let reach = &self.reach;
@@ -490,7 +500,8 @@ impl SelfContact {
         let half = 0.5 * thickness;
         for &v in &self.escaped {
             let v = v as usize;
-            self.reach[v] = reach_box(x0[v], x1[v], REACH_OWN * motion(v) + REACH_SHARED * largest + thickness);
+            self.reach[v] =
+                reach_box(self.before[v], x0[v], x1[v], REACH_OWN * motion(v) + REACH_SHARED * largest + thickness);
             self.dirty_vertex[v] = true;
         }
         let reach = &self.reach;
@@ -761,6 +772,12 @@ impl SelfContact {
     /// `p` in place (vertices with inverse mass 0 do not move). `h` is the (sub)step length, for
     /// the velocities of [`SelfContact::limit_velocities`].
     pub fn resolve(&mut self, x0: &[Vec3], p: &mut [Vec3], inv_mass: &[f32], thickness: f64, h: f32) -> ContactCounts {
+        let counts = self.resolve_from(x0, p, inv_mass, thickness, h);
+        self.before.copy_from_slice(x0);
+        counts
+    }
+
+    fn resolve_from(&mut self, x0: &[Vec3], p: &mut [Vec3], inv_mass: &[f32], thickness: f64, h: f32) -> ContactCounts {
         let mut counts = ContactCounts::default();
         self.contacts.clear();
         self.flags.fill(0);
