@@ -607,9 +607,12 @@ impl SelfContact {
             }
             return;
         }
+        // Also flags the primitives of the moved vertices in the `dirty_*` scratch (cleared by
+        // `clear_moved_primitives`), so that the pairs to re-check are found with two lookups.
         for v in 0..x0.len() {
             if self.flags[v] & MOVED != 0 {
                 self.vertex_swept[v] = SweptBox::of_vertex(x0[v], x1[v]);
+                self.dirty_vertex[v] = true;
             }
         }
         let ((es, el), (fs, fl)) = (&self.vertex_edges, &self.vertex_faces);
@@ -621,10 +624,29 @@ impl SelfContact {
             for &e in &el[es[v] as usize..es[v + 1] as usize] {
                 let [a, b] = self.edges[e as usize];
                 self.edge_swept[e as usize] = vb[a as usize].union(&vb[b as usize]);
+                self.dirty_edge[e as usize] = true;
             }
             for &f in &fl[fs[v] as usize..fs[v + 1] as usize] {
                 let [a, b, c] = self.triangles[f as usize];
                 self.face_swept[f as usize] = vb[a as usize].union(&vb[b as usize]).union(&vb[c as usize]);
+                self.dirty_face[f as usize] = true;
+            }
+        }
+    }
+
+    /// Clears the flags `update_swept_boxes` set on the primitives of the moved vertices.
+    fn clear_moved_primitives(&mut self) {
+        let ((es, el), (fs, fl)) = (&self.vertex_edges, &self.vertex_faces);
+        for v in 0..self.flags.len() {
+            if self.flags[v] & MOVED == 0 {
+                continue;
+            }
+            self.dirty_vertex[v] = false;
+            for &e in &el[es[v] as usize..es[v + 1] as usize] {
+                self.dirty_edge[e as usize] = false;
+            }
+            for &f in &fl[fs[v] as usize..fs[v + 1] as usize] {
+                self.dirty_face[f as usize] = false;
             }
         }
     }
@@ -634,6 +656,8 @@ impl SelfContact {
         self.update_swept_boxes(x0, x1, only_moved);
         let margin = swept_margin(thickness);
         let (vb, eb, fb) = (&self.vertex_swept, &self.edge_swept, &self.face_swept);
+        // With `only_moved`: the primitives with a moved vertex.
+        let (mv, me, mf) = (&self.dirty_vertex, &self.dirty_edge, &self.dirty_face);
         let (tris, edges, flags, settings) = (&self.triangles, &self.edges, &self.flags, &self.settings);
         let hits = &mut self.hits;
         let first = !only_moved;
@@ -663,7 +687,9 @@ impl SelfContact {
                 let t = tris[f as usize];
                 // The cached pairs are a superset: the swept boxes decide who is a candidate.
                 // (Flags first when most pairs are not wanted.)
-                if only_moved && !wanted([v, t[0], t[1], t[2]]) || vb[v as usize].separated(&fb[f as usize], margin) {
+                if only_moved && !(mv[v as usize] || mf[f as usize])
+                    || vb[v as usize].separated(&fb[f as usize], margin)
+                {
                     return;
                 }
                 if t.contains(&v) || !wanted([v, t[0], t[1], t[2]]) {
@@ -683,7 +709,9 @@ impl SelfContact {
             } else {
                 let (i, j) = (i.min(j), i.max(j));
                 let ([a, b], [c, e]) = (edges[i as usize], edges[j as usize]);
-                if only_moved && !wanted([a, b, c, e]) || eb[i as usize].separated(&eb[j as usize], margin) {
+                if only_moved && !(me[i as usize] || me[j as usize])
+                    || eb[i as usize].separated(&eb[j as usize], margin)
+                {
                     return;
                 }
                 if a == c || a == e || b == c || b == e || !wanted([a, b, c, e]) {
@@ -711,6 +739,9 @@ impl SelfContact {
         // The traversal order is fixed, but sort anyway so the projection order is the pairs'.
         self.hits.sort_unstable_by(|x, y| (x.0, x.1, x.2).cmp(&(y.0, y.1, y.2)));
         self.hits.dedup_by(|x, y| (x.0, x.1, x.2) == (y.0, y.1, y.2));
+        if only_moved {
+            self.clear_moved_primitives();
+        }
     }
 
     /// A contact constraint for hit `k` of `self.hits`: weights and barycentrics at the time of
