@@ -4,10 +4,12 @@
 //! candidates (pairs whose swept boxes meet, from the BVH pairs cached across steps), after the
 //! swept-hull filter, after the non-penetration filter (= exact CCD tests run: the inclusion
 //! search, or the sampled distance for a certain contact), the contacts, and the collision
-//! stage's share of the step time.
-//! A second table squeezes each mesh with 30 times the default pressure (contacts appear).
-//! Run with `cargo bench --bench shell_collision` (`SHELL_COLLISION_STEPS=n` steps, 60 by
-//! default; `SHELL_COLLISION_SQUEEZE=0` skips the squeezed table; `SHELL_COLLISION_MESHES=eight,bear`
+//! stage's share of the step time. The first table runs the default scene: every default
+//! setting, until its stop (volume ratio below 0.3), at most 400 steps.
+//! A second table squeezes each mesh with 30 times the default pressure (contacts appear), 60
+//! steps without the stop.
+//! Run with `cargo bench --bench shell_collision` (`SHELL_COLLISION_STEPS=n` caps both tables at n
+//! steps; `SHELL_COLLISION_SQUEEZE=0` skips the squeezed table; `SHELL_COLLISION_MESHES=eight,bear`
 //! runs only those meshes). Goal (issue 4): collision stage at most 50% of
 //! the step on the kitten at default settings.
 //!
@@ -47,7 +49,7 @@ fn default_settings() -> ShellSettings {
         bending: BendingKind::IsometricRest,
         bending_coefficient: d.bending_coefficient,
         damping: d.damping,
-        stop_volume_ratio: 0.0,
+        stop_volume_ratio: d.stop_volume_ratio,
         collisions: d.collisions,
         collision_thickness: d.collision_thickness,
         threads: 1,
@@ -64,12 +66,16 @@ struct Row {
     collision_ms: f64,
     step_ms: f64,
     ratio: f64,
+    steps: usize,
 }
 
 fn run(name: &str, pressure_factor: f32, steps: usize) -> Row {
     let (mesh, topo) = unit_mesh(name);
     let mut settings = default_settings();
     settings.pressure *= pressure_factor;
+    if pressure_factor != 1.0 {
+        settings.stop_volume_ratio = 0.0; // squeezed: run every step
+    }
     let mut shell = Shell::new(&mesh, &topo, settings).expect("shell");
     let (v, e, f) = (mesh.vertex_count() as f64, topo.edges.len() as f64, mesh.triangle_count() as f64);
     let brute = v * f + e * (e - 1.0) / 2.0;
@@ -83,6 +89,7 @@ fn run(name: &str, pressure_factor: f32, steps: usize) -> Row {
         collision_ms: 0.0,
         step_ms: 0.0,
         ratio: 1.0,
+        steps: 0,
     };
     let mut taken = 0;
     for _ in 0..steps {
@@ -103,6 +110,9 @@ fn run(name: &str, pressure_factor: f32, steps: usize) -> Row {
         row.step_ms += stats.step_seconds * 1e3;
         row.ratio = stats.volume_ratio;
         taken += 1;
+        if stats.finished {
+            break;
+        }
     }
     let n = taken.max(1) as f64;
     row.candidates /= n;
@@ -111,16 +121,17 @@ fn run(name: &str, pressure_factor: f32, steps: usize) -> Row {
     row.contacts /= n;
     row.collision_ms /= n;
     row.step_ms /= n;
+    row.steps = taken;
     row
 }
 
 fn table(title: &str, pressure_factor: f32, steps: usize) {
     println!("\n{title} ({steps} steps, means per step)\n");
     println!(
-        "| mesh | brute-force tests | BVH candidates | after swept boxes | exact tests (after plane filter) | contacts | \
-         fail-safe reverts (total) | collision ms | step ms | collision share | V/V0 |"
+        "| mesh | steps | brute-force tests | BVH candidates | after swept boxes | exact tests (after plane filter) | \
+         contacts | fail-safe reverts (total) | collision ms | step ms | collision share | V/V0 |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     // SHELL_COLLISION_MESHES=eight,hand runs only the meshes whose names start with those.
     let only = std::env::var("SHELL_COLLISION_MESHES").unwrap_or_default();
     for name in ["kitten.obj", "hand.obj", "eight.obj", "wapiti_elk.obj", "bear.obj"] {
@@ -129,7 +140,8 @@ fn table(title: &str, pressure_factor: f32, steps: usize) {
         }
         let r = run(name, pressure_factor, steps);
         println!(
-            "| {name} | {:.3e} | {:.0} | {:.0} | {:.0} | {:.1} | {} | {:.2} | {:.2} | {:.0}% | {:.3} |",
+            "| {name} | {} | {:.3e} | {:.0} | {:.0} | {:.0} | {:.1} | {} | {:.2} | {:.2} | {:.0}% | {:.3} |",
+            r.steps,
             r.brute,
             r.candidates,
             r.after_boxes,
@@ -145,9 +157,13 @@ fn table(title: &str, pressure_factor: f32, steps: usize) {
 }
 
 fn main() {
-    let steps = std::env::var("SHELL_COLLISION_STEPS").ok().and_then(|s| s.parse().ok()).unwrap_or(60);
-    table("Default settings (pressure 0.7 Pa, 1 thread)", 1.0, steps);
+    let steps = std::env::var("SHELL_COLLISION_STEPS").ok().and_then(|s| s.parse().ok());
+    table(
+        "Default settings (pressure 0.7 Pa, 1 thread), until the default stop (V/V0 below 0.3)",
+        1.0,
+        steps.unwrap_or(400),
+    );
     if std::env::var("SHELL_COLLISION_SQUEEZE").map_or(true, |v| v != "0") {
-        table("Squeezed: pressure x30", 30.0, steps);
+        table("Squeezed: pressure x30", 30.0, steps.unwrap_or(60));
     }
 }
