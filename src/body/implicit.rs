@@ -76,6 +76,8 @@ pub(crate) struct ImplicitScratch {
     gas_coef: Vec<f64>,
     gas_dot_v: Vec<f64>,
     gas_dot: Vec<f64>,
+    /// Per chunk of vertices and per fragment, that chunk's part of `Σ g·p`.
+    gas_partial: Vec<f64>,
     /// Δv of the previous substep (the warm start), reset when the vertex count changes.
     previous_dv: Vec<Vec3A>,
     /// Contact constraint of each vertex (only with obstacles, and only while one touches).
@@ -110,7 +112,11 @@ impl ImplicitScratch {
                 * 16
             + self.contact.capacity() * std::mem::size_of::<ContactFilter>()
             + self.coupling.capacity() * std::mem::size_of::<Coupling>()
-            + (self.gas_coef.capacity() + self.gas_dot_v.capacity() + self.gas_dot.capacity()) * 8
+            + (self.gas_coef.capacity()
+                + self.gas_dot_v.capacity()
+                + self.gas_dot.capacity()
+                + self.gas_partial.capacity())
+                * 8
             + self.magnitude.capacity() * 4
             + self.inv_diag.capacity() * std::mem::size_of::<Mat3A>()
     }
@@ -301,6 +307,97 @@ fn gas_dots(sys: &System, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
     }
 }
 
+/// A chunk of the residual update.
+struct ResidualTask<'a> {
+    first: usize,
+    dv: &'a mut [Vec3A],
+    r: &'a mut [Vec3A],
+    z: &'a mut [Vec3A],
+    rr: f64,
+    rz: f64,
+}
+
+/// `Δv += α p`, `r -= α A p`, `z = M⁻¹ r` (filtered by the contacts) in parallel chunks; returns
+/// `(r·r, r·z)` summed in chunk order.
+#[allow(clippy::too_many_arguments)]
+fn update_residual(
+    pool: &WorkerPool,
+    (dv, r, z): (&mut [Vec3A], &mut [Vec3A], &mut [Vec3A]),
+    p: &[Vec3A],
+    ap: &[Vec3A],
+    inv_diag: &[Mat3A],
+    contact: &[ContactFilter],
+    alpha: f32,
+    any_contact: bool,
+) -> (f64, f64) {
+    let mut tasks: Vec<ResidualTask> = dv
+        .chunks_mut(CHUNK)
+        .zip(r.chunks_mut(CHUNK))
+        .zip(z.chunks_mut(CHUNK))
+        .enumerate()
+        .map(|(c, ((dv, r), z))| ResidualTask { first: c * CHUNK, dv, r, z, rr: 0.0, rz: 0.0 })
+        .collect();
+    pool.for_each_task(&mut tasks, |t| {
+        let (mut rr, mut rz) = (0.0f64, 0.0f64);
+        for k in 0..t.dv.len() {
+            let i = t.first + k;
+            t.dv[k] += p[i] * alpha;
+            let r = t.r[k] - ap[i] * alpha;
+            let mut z = inv_diag[i] * r;
+            if any_contact {
+                z = contact[i].apply(z);
+            }
+            t.r[k] = r;
+            t.z[k] = z;
+            rr += r.length_squared() as f64;
+            rz += r.dot(z) as f64;
+        }
+        (t.rr, t.rz) = (rr, rz);
+    });
+    tasks.iter().fold((0.0, 0.0), |(rr, rz), t| (rr + t.rr, rz + t.rz))
+}
+
+/// A chunk of the search direction update, with its part of `Σ g·p` per fragment.
+struct DirectionTask<'a> {
+    first: usize,
+    p: &'a mut [Vec3A],
+    gas: &'a mut [f64],
+}
+
+/// `p = z + β p` in parallel chunks; each chunk leaves its `Σ g·p` per fragment in its part of
+/// `partial` (`fragments` entries per chunk).
+fn update_direction(
+    pool: &WorkerPool,
+    sys: &System,
+    p: &mut [Vec3A],
+    z: &[Vec3A],
+    beta: f32,
+    partial: &mut [f64],
+    fragments: usize,
+) {
+    let mut gas_chunks = partial.chunks_mut(fragments.max(1));
+    let mut tasks: Vec<DirectionTask> = p
+        .chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(c, p)| DirectionTask {
+            first: c * CHUNK,
+            p,
+            gas: if fragments > 0 { gas_chunks.next().unwrap() } else { &mut [] },
+        })
+        .collect();
+    pool.for_each_task(&mut tasks, |t| {
+        t.gas.fill(0.0);
+        for k in 0..t.p.len() {
+            let i = t.first + k;
+            let value = z[i] + t.p[k] * beta;
+            t.p[k] = value;
+            if let Some(frag) = sys.fragment(i) {
+                t.gas[frag] += Vec3A::from(sys.gradient[i]).dot(value) as f64;
+            }
+        }
+    });
+}
+
 /// One substep of length `h`; returns (wind work in J, conjugate-gradient iterations).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn substep(
@@ -434,6 +531,7 @@ pub(crate) fn substep(
     }
     let any_contact = !s.contact.is_empty();
     let mut gas_dot = std::mem::take(&mut s.gas_dot);
+    let mut gas_partial = std::mem::take(&mut s.gas_partial);
     if gas.is_some() {
         gas_dots(&sys, |i| s.dv[i], &mut gas_dot);
     }
@@ -458,6 +556,8 @@ pub(crate) fn substep(
     let rhs_norm = s.rhs.iter().map(|r| r.length_squared() as f64).sum::<f64>().sqrt();
     let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
     let mut iterations = 0;
+    let fragments = gas_dot.len();
+    gas_partial.resize(n.div_ceil(CHUNK) * fragments, 0.0);
     if r0 > 0.0 {
         let tolerance = r0.powi(2);
         while iterations < max_iterations {
@@ -467,33 +567,36 @@ pub(crate) fn substep(
                 break;
             }
             let alpha = (rz / pap) as f32;
-            // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass.
-            let (mut rr, mut rz_next) = (0.0f64, 0.0f64);
-            for i in 0..n {
-                s.dv[i] += s.p[i] * alpha;
-                let r = s.r[i] - s.ap[i] * alpha;
-                let mut z = s.inv_diag[i] * r;
-                if any_contact {
-                    z = s.contact[i].apply(z);
-                }
-                s.r[i] = r;
-                s.z[i] = z;
-                rr += r.length_squared() as f64;
-                rz_next += r.dot(z) as f64;
-            }
+            // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass, in
+            // parallel chunks whose sums are added in chunk order.
+            let (rr, rz_next) = update_residual(
+                pool,
+                (&mut s.dv, &mut s.r, &mut s.z),
+                &s.p,
+                &s.ap,
+                &s.inv_diag,
+                &s.contact,
+                alpha,
+                any_contact,
+            );
             if rr <= tolerance {
                 break;
             }
             let beta = (rz_next / rz) as f32;
             rz = rz_next;
-            for i in 0..n {
-                s.p[i] = s.z[i] + s.p[i] * beta;
-            }
-            if gas.is_some() {
-                gas_dots(&sys, |i| s.p[i], &mut gas_dot);
+            // p = z + β p, with Σ g·p per gas fragment in the same pass.
+            update_direction(pool, &sys, &mut s.p, &s.z, beta, &mut gas_partial, fragments);
+            if fragments > 0 {
+                gas_dot.fill(0.0);
+                for partial in gas_partial.chunks_exact(fragments) {
+                    for (total, value) in gas_dot.iter_mut().zip(partial) {
+                        *total += value;
+                    }
+                }
             }
         }
     }
+    s.gas_partial = gas_partial;
     s.gas_dot = gas_dot;
     // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling term
     // of the matrix sums to zero); a truncated solve leaves a small error there, removed by a
