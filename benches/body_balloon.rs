@@ -105,10 +105,11 @@ fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usiz
         iterations += stats.solver_iterations;
         if std::env::var("TRACE").is_ok() && k % 10 == 0 {
             eprintln!(
-                "step {k}: {} it, {:.2} ms, V/V0 {:.4}",
+                "step {k}: {} it, {:.2} ms, V/V0 {:.4}, E_kin {:.3e} J",
                 stats.solver_iterations,
                 elapsed * 1e3,
-                stats.volume / v0
+                stats.volume / v0,
+                stats.kinetic_energy
             );
         }
         volumes.push(stats.volume / v0);
