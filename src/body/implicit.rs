@@ -11,9 +11,15 @@
 //! right side, the block-Jacobi preconditioner and the coupling block of every (vertex, spring)
 //! pair, stored in that same order, so each product with the matrix streams through memory once.
 //! Both passes run in fixed chunks of vertices, so the result does not depend on the thread count.
+//!
+//! Preconditioner: two levels, added. The 3x3 block of each vertex (block Jacobi) resolves what
+//! happens at one vertex; the coarse level (`coarse`: aggregates of about 7 vertices, a constant
+//! scalar matrix factored once) moves whole patches, the smooth motions that block Jacobi alone
+//! leaves to many iterations. Both are filtered by the pins and contacts (modified PCG).
 
 use glam::{Mat3A, Vec3, Vec3A};
 
+use super::coarse::CoarseSpace;
 use super::forces::{Model, add_gas_forces, external_forces};
 use super::gas::Gas;
 use super::obstacles::{Obstacle, touching};
@@ -82,6 +88,10 @@ pub(crate) struct ImplicitScratch {
     previous_dv: Vec<Vec3A>,
     /// Contact constraint of each vertex (only with obstacles, and only while one touches).
     contact: Vec<ContactFilter>,
+    /// The coarse level of the preconditioner (made on the first substep) and the substep
+    /// length it was made (or tried) for.
+    coarse: Option<CoarseSpace>,
+    coarse_h: f32,
 }
 
 impl ImplicitScratch {
@@ -97,6 +107,9 @@ impl ImplicitScratch {
             let from = origin[k] as usize;
             let guess = if from < old { self.previous_dv[from] } else { Vec3A::ZERO };
             self.previous_dv.push(guess);
+        }
+        if let Some(coarse) = self.coarse.as_mut() {
+            coarse.extend(origin);
         }
     }
 
@@ -119,6 +132,7 @@ impl ImplicitScratch {
                 * 8
             + self.magnitude.capacity() * 4
             + self.inv_diag.capacity() * std::mem::size_of::<Mat3A>()
+            + self.coarse.as_ref().map_or(0, CoarseSpace::memory_bytes)
     }
 }
 
@@ -366,11 +380,14 @@ struct DirectionTask<'a> {
 
 /// `p = z + β p` in parallel chunks; each chunk leaves its `Σ g·p` per fragment in its part of
 /// `partial` (`fragments` entries per chunk).
+#[allow(clippy::too_many_arguments)]
 fn update_direction(
     pool: &WorkerPool,
     sys: &System,
     p: &mut [Vec3A],
     z: &[Vec3A],
+    coarse: Option<&CoarseSpace>,
+    contact: &[ContactFilter],
     beta: f32,
     partial: &mut [f64],
     fragments: usize,
@@ -389,13 +406,34 @@ fn update_direction(
         t.gas.fill(0.0);
         for k in 0..t.p.len() {
             let i = t.first + k;
-            let value = z[i] + t.p[k] * beta;
+            let mut zi = z[i];
+            if let Some(coarse) = coarse {
+                // The coarse correction, filtered like the rest of z.
+                if sys.model.inv_mass[i] > 0.0 {
+                    let c = coarse.correction(i);
+                    zi += contact.get(i).map_or(c, |f| f.apply(c));
+                }
+            }
+            let value = zi + t.p[k] * beta;
             t.p[k] = value;
             if let Some(frag) = sys.fragment(i) {
                 t.gas[frag] += Vec3A::from(sys.gradient[i]).dot(value) as f64;
             }
         }
     });
+}
+
+/// `Σ g·p` per fragment from the chunks' parts (in chunk order).
+fn sum_gas_partial(partial: &[f64], gas_dot: &mut [f64]) {
+    if gas_dot.is_empty() {
+        return;
+    }
+    gas_dot.fill(0.0);
+    for part in partial.chunks_exact(gas_dot.len()) {
+        for (total, value) in gas_dot.iter_mut().zip(part) {
+            *total += value;
+        }
+    }
 }
 
 /// One substep of length `h`; returns (wind work in J, conjugate-gradient iterations).
@@ -521,6 +559,17 @@ pub(crate) fn substep(
                         s.contact[i] = ContactFilter::Slide(normal, pushed.max(0.0));
                         let dv = Vec3::from(s.dv[i]);
                         s.dv[i] = (dv - normal * (dv.dot(normal) + v[i].dot(normal))).into();
+                        // Block Jacobi on the tangent plane: the inverse of the diagonal block
+                        // restricted to it, `D⁻¹ - D⁻¹n nᵀD⁻¹ / (nᵀD⁻¹n)` (z = D⁻¹(r - λ n) with
+                        // n·z = 0). Filtering the unrestricted inverse instead overstates the
+                        // tangential response where springs couple the normal to the tangent
+                        // (the rim of a contact patch) and stalls the iterations.
+                        let n = Vec3A::from(normal);
+                        let dn = s.inv_diag[i] * n;
+                        let ndn = n.dot(dn);
+                        if ndn > 0.0 {
+                            s.inv_diag[i] -= outer(dn, dn / ndn);
+                        }
                     }
                 }
             }
@@ -548,16 +597,26 @@ pub(crate) fn substep(
         s.z[i] = z;
         rz += r.dot(z) as f64;
     }
-    s.p.copy_from_slice(&s.z);
-    if gas.is_some() {
-        gas_dots(&sys, |i| s.p[i], &mut gas_dot);
+    // The coarse level: made once (again only if the substep length changes; after a topology
+    // change it is extended, not remade, so a cracking step costs no factorization).
+    if s.coarse_h != h {
+        s.coarse = CoarseSpace::new(model, x, h);
+        s.coarse_h = h;
     }
+    let mut coarse = s.coarse.take();
+
+    if let Some(c) = coarse.as_mut() {
+        rz += c.solve(pool, &s.r);
+    }
+    let fragments = gas_dot.len();
+    gas_partial.resize(n.div_ceil(CHUNK) * fragments, 0.0);
+    s.p.fill(Vec3A::ZERO);
+    update_direction(pool, &sys, &mut s.p, &s.z, coarse.as_ref(), &s.contact, 0.0, &mut gas_partial, fragments);
+    sum_gas_partial(&gas_partial, &mut gas_dot);
     let force_scale = h as f64 * s.magnitude.iter().map(|&m| (m as f64) * (m as f64)).sum::<f64>().sqrt();
     let rhs_norm = s.rhs.iter().map(|r| r.length_squared() as f64).sum::<f64>().sqrt();
     let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
     let mut iterations = 0;
-    let fragments = gas_dot.len();
-    gas_partial.resize(n.div_ceil(CHUNK) * fragments, 0.0);
     if r0 > 0.0 {
         let tolerance = r0.powi(2);
         while iterations < max_iterations {
@@ -582,20 +641,28 @@ pub(crate) fn substep(
             if rr <= tolerance {
                 break;
             }
+            let mut rz_next = rz_next;
+            if let Some(c) = coarse.as_mut() {
+                rz_next += c.solve(pool, &s.r);
+            }
             let beta = (rz_next / rz) as f32;
             rz = rz_next;
             // p = z + β p, with Σ g·p per gas fragment in the same pass.
-            update_direction(pool, &sys, &mut s.p, &s.z, beta, &mut gas_partial, fragments);
-            if fragments > 0 {
-                gas_dot.fill(0.0);
-                for partial in gas_partial.chunks_exact(fragments) {
-                    for (total, value) in gas_dot.iter_mut().zip(partial) {
-                        *total += value;
-                    }
-                }
-            }
+            update_direction(
+                pool,
+                &sys,
+                &mut s.p,
+                &s.z,
+                coarse.as_ref(),
+                &s.contact,
+                beta,
+                &mut gas_partial,
+                fragments,
+            );
+            sum_gas_partial(&gas_partial, &mut gas_dot);
         }
     }
+    s.coarse = coarse;
     s.gas_partial = gas_partial;
     s.gas_dot = gas_dot;
     // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling term
