@@ -108,6 +108,10 @@ pub struct Body {
     springs: Springs,
     gas: Option<Gas>,
     fracture: Option<Fracture>,
+    /// The connectivity of `triangles` (kept only once the body can break or has broken): a
+    /// topology change starts from it instead of building it again, so a cracking step builds
+    /// the topology once (about 5 ms at 10k vertices), not twice.
+    topology: Option<Topology>,
     obstacles: Vec<Obstacle>,
     scratch: Scratch,
     steps: u64,
@@ -181,6 +185,7 @@ impl Body {
             gas
         });
         let fracture = settings.fracture_enabled().then(|| Fracture::new(n, triangles.len()));
+        let kept_topology = settings.fracture_enabled().then(|| topology.clone());
         let mut obstacles = Vec::new();
         if settings.ground {
             obstacles.push(Obstacle::Plane { point: Vec3::new(0.0, settings.ground_height, 0.0), normal: Vec3::Y });
@@ -205,6 +210,7 @@ impl Body {
             springs,
             gas,
             fracture,
+            topology: kept_topology,
             obstacles,
             scratch,
             steps: 0,
@@ -612,7 +618,7 @@ impl Body {
         let n = self.nodes.len();
         let fracture = self.fracture.get_or_insert_with(|| Fracture::new(n, self.triangles.len()));
         let old_face_fragment = self.face_fragment.clone();
-        let mut topology = Topology::build(&self.triangles, n);
+        let mut topology = self.topology.take().unwrap_or_else(|| Topology::build(&self.triangles, n));
         if !pairs.is_empty() {
             let edges: Vec<u32> = pairs
                 .iter()
@@ -659,6 +665,7 @@ impl Body {
             gas.inherit(&old.n_rt, &old.volume, old_face_fragment, &self.face_fragment, &self.nodes.x, &self.triangles);
             self.gas = Some(gas);
         }
+        self.topology = Some(topology);
         self.generation += 1;
     }
 
@@ -737,6 +744,7 @@ impl Body {
             + self.springs.memory_bytes()
             + self.gas.as_ref().map_or(0, Gas::memory_bytes)
             + self.fracture.as_ref().map_or(0, Fracture::memory_bytes)
+            + self.topology.as_ref().map_or(0, Topology::memory_bytes)
             + self.obstacles.capacity() * std::mem::size_of::<Obstacle>()
             + self.scratch.memory_bytes()
             + self.pool.memory_bytes()
