@@ -17,7 +17,7 @@
 //! scalar matrix factored once) moves whole patches, the smooth motions that block Jacobi alone
 //! leaves to many iterations. Both are filtered by the pins and contacts (modified PCG).
 
-use glam::{Mat3A, Vec3, Vec3A};
+use glam::{Mat3A, Vec3, Vec3A, Vec4};
 
 use super::coarse::CoarseSpace;
 use super::forces::{Model, add_gas_forces, external_forces};
@@ -27,12 +27,29 @@ use super::springs::{is_degenerate, spring_block_coefficients};
 use crate::parallel::WorkerPool;
 
 /// One spring seen from one of its ends: the block `alpha I + beta u uᵀ` of the system matrix
-/// that couples the two ends (`h²` times the stiffness block plus `h` times the damping).
+/// that couples the two ends (`h²` times the stiffness block plus `h` times the damping), held
+/// as `alpha I + w wᵀ` with `w = √beta u` (beta ≥ 0) in 16 bytes (w in x, y, z, alpha in the
+/// fourth lane): the products with the matrix stream this array, so its size is their speed.
 #[derive(Clone, Copy, Default)]
-struct Coupling {
-    u: Vec3A,
-    alpha: f32,
-    beta: f32,
+struct Coupling(Vec4);
+
+impl Coupling {
+    fn new(u: Vec3A, alpha: f32, beta: f32) -> Self {
+        Coupling((u * beta.max(0.0).sqrt()).extend(alpha))
+    }
+
+    /// `w` (the fourth lane is ignored by every Vec3A dot product and length).
+    #[inline(always)]
+    fn w(self) -> Vec3A {
+        Vec3A::from_vec4(self.0)
+    }
+
+    /// The block times `d`.
+    #[inline(always)]
+    fn apply(self, d: Vec3A) -> Vec3A {
+        let w = self.w();
+        d * self.0.w + w * w.dot(d)
+    }
 }
 
 /// How a vertex in contact with an obstacle is constrained inside the solve (Baraff and Witkin
@@ -65,8 +82,10 @@ pub(crate) struct ImplicitScratch {
     /// External and gas forces at the start of the substep (the springs are added per vertex).
     pub force: Vec<Vec3>,
     pub gradient: Vec<Vec3>,
-    /// Per entry of `Springs::adjacency`: the coupling block of that (vertex, spring) pair.
+    /// Per entry of `Springs::adjacency`: the coupling block of that (vertex, spring) pair, and
+    /// its other end (the products read these 20 bytes, not the 8-byte adjacency entry).
     coupling: Vec<Coupling>,
+    neighbor: Vec<u32>,
     rhs: Vec<Vec3A>,
     dv: Vec<Vec3A>,
     r: Vec<Vec3A>,
@@ -125,6 +144,7 @@ impl ImplicitScratch {
                 * 16
             + self.contact.capacity() * std::mem::size_of::<ContactFilter>()
             + self.coupling.capacity() * std::mem::size_of::<Coupling>()
+            + self.neighbor.capacity() * 4
             + (self.gas_coef.capacity()
                 + self.gas_dot_v.capacity()
                 + self.gas_dot.capacity()
@@ -193,6 +213,7 @@ impl System<'_> {
 struct AssemblyTask<'a> {
     first: usize,
     coupling: &'a mut [Coupling],
+    neighbor: &'a mut [u32],
     rhs: &'a mut [Vec3A],
     inv_diag: &'a mut [Mat3A],
     magnitude: &'a mut [f32],
@@ -206,6 +227,7 @@ fn assemble_vertex(
     force: Vec3,
     gas_dot_v: &[f64],
     coupling: &mut [Coupling],
+    neighbor: &mut [u32],
 ) -> (Vec3A, Mat3A, f32) {
     let model = sys.model;
     let (ks, kd) = (model.settings.spring_stiffness, model.settings.spring_damping);
@@ -215,7 +237,8 @@ fn assemble_vertex(
     let mut kv = Vec3A::ZERO;
     let mut diag = Mat3A::from_diagonal(Vec3::splat(model.mass[i]));
     let mut magnitude = model.mass[i] * model.settings.gravity.length();
-    for (slot, &(spring, j)) in coupling.iter_mut().zip(model.springs.around(i)) {
+    for ((slot, other), &(spring, j)) in coupling.iter_mut().zip(neighbor.iter_mut()).zip(model.springs.around(i)) {
+        *other = j;
         let rest = model.springs.rest[spring as usize];
         let d = Vec3A::from(sys.x[j as usize]) - xi;
         let len = d.length();
@@ -230,8 +253,9 @@ fn assemble_vertex(
         let (a, b) = spring_block_coefficients(len, rest, ks);
         kv += (dvel * a + u * (b * u.dot(dvel))) * h2;
         let (alpha, beta) = (h2 * a, h2 * b + h * kd);
-        *slot = Coupling { u, alpha, beta };
-        diag += Mat3A::from_diagonal(Vec3::splat(alpha)) + outer(u * beta, u);
+        *slot = Coupling::new(u, alpha, beta);
+        let w = slot.w();
+        diag += Mat3A::from_diagonal(Vec3::splat(alpha)) + outer(w, w);
         magnitude += stretch.abs();
     }
     let mut rhs = f * h + kv;
@@ -261,14 +285,13 @@ struct ProductTask<'a> {
 fn product_rows(
     sys: &System,
     contact: &[ContactFilter],
-    coupling: &[Coupling],
+    (coupling, neighbor): (&[Coupling], &[u32]),
     input: &[Vec3A],
     gas_dot: &[f64],
     task: &mut ProductTask,
 ) {
     let model = sys.model;
     let offsets = &model.springs.offsets;
-    let adjacency = &model.springs.adjacency;
     let mut dot = 0.0f64;
     for (k, o) in task.out.iter_mut().enumerate() {
         let i = task.first + k;
@@ -279,9 +302,8 @@ fn product_rows(
         let xi = input[i];
         let mut acc = xi * model.mass[i];
         let (start, end) = (offsets[i] as usize, offsets[i + 1] as usize);
-        for (c, &(_, j)) in coupling[start..end].iter().zip(&adjacency[start..end]) {
-            let d = xi - input[j as usize];
-            acc += d * c.alpha + c.u * (c.beta * c.u.dot(d));
+        for (c, &j) in coupling[start..end].iter().zip(&neighbor[start..end]) {
+            acc += c.apply(xi - input[j as usize]);
         }
         if let Some(frag) = sys.fragment(i) {
             acc += Vec3A::from(sys.gradient[i]) * (sys.gas_coef[frag] * gas_dot[frag]) as f32;
@@ -300,7 +322,7 @@ fn product(
     pool: &WorkerPool,
     sys: &System,
     contact: &[ContactFilter],
-    coupling: &[Coupling],
+    coupling: (&[Coupling], &[u32]),
     input: &[Vec3A],
     gas_dot: &[f64],
     out: &mut [Vec3A],
@@ -457,6 +479,7 @@ pub(crate) fn substep(
     s.magnitude.resize(n, 0.0);
     s.inv_diag.resize(n, Mat3A::ZERO);
     s.coupling.resize(model.springs.adjacency.len(), Coupling::default());
+    s.neighbor.resize(model.springs.adjacency.len(), 0);
     let power = external_forces(model, x, v, &mut s.force);
     let h2 = h * h;
     let mut gas_dot_v = std::mem::take(&mut s.gas_dot_v);
@@ -492,6 +515,7 @@ pub(crate) fn substep(
     {
         let mut tasks = Vec::with_capacity(n.div_ceil(CHUNK));
         let mut coupling = &mut s.coupling[..];
+        let mut neighbor = &mut s.neighbor[..];
         let chunks = s.rhs.chunks_mut(CHUNK).zip(s.inv_diag.chunks_mut(CHUNK)).zip(s.magnitude.chunks_mut(CHUNK));
         for (c, ((rhs, inv_diag), magnitude)) in chunks.enumerate() {
             let first = c * CHUNK;
@@ -499,7 +523,9 @@ pub(crate) fn substep(
             let len = (model.springs.offsets[end] - model.springs.offsets[first]) as usize;
             let (head, tail) = std::mem::take(&mut coupling).split_at_mut(len);
             coupling = tail;
-            tasks.push(AssemblyTask { first, coupling: head, rhs, inv_diag, magnitude });
+            let (neighbor_head, neighbor_tail) = std::mem::take(&mut neighbor).split_at_mut(len);
+            neighbor = neighbor_tail;
+            tasks.push(AssemblyTask { first, coupling: head, neighbor: neighbor_head, rhs, inv_diag, magnitude });
         }
         let force = &s.force;
         let gas_dot_v = &gas_dot_v;
@@ -508,8 +534,14 @@ pub(crate) fn substep(
             for k in 0..t.rhs.len() {
                 let i = t.first + k;
                 let count = model.springs.around(i).len();
-                let (rhs, inv_diag, magnitude) =
-                    assemble_vertex(&sys, i, force[i], gas_dot_v, &mut t.coupling[cursor..cursor + count]);
+                let (rhs, inv_diag, magnitude) = assemble_vertex(
+                    &sys,
+                    i,
+                    force[i],
+                    gas_dot_v,
+                    &mut t.coupling[cursor..cursor + count],
+                    &mut t.neighbor[cursor..cursor + count],
+                );
                 cursor += count;
                 t.rhs[k] = rhs;
                 t.inv_diag[k] = inv_diag;
@@ -584,7 +616,7 @@ pub(crate) fn substep(
     if gas.is_some() {
         gas_dots(&sys, |i| s.dv[i], &mut gas_dot);
     }
-    product(pool, &sys, &s.contact, &s.coupling, &s.dv, &gas_dot, &mut s.ap);
+    product(pool, &sys, &s.contact, (&s.coupling, &s.neighbor), &s.dv, &gas_dot, &mut s.ap);
     let mut rz = 0.0f64;
     for i in 0..n {
         let mut r = s.rhs[i] - s.ap[i];
@@ -621,7 +653,7 @@ pub(crate) fn substep(
         let tolerance = r0.powi(2);
         while iterations < max_iterations {
             iterations += 1;
-            let pap = product(pool, &sys, &s.contact, &s.coupling, &s.p, &gas_dot, &mut s.ap);
+            let pap = product(pool, &sys, &s.contact, (&s.coupling, &s.neighbor), &s.p, &gas_dot, &mut s.ap);
             if pap <= 0.0 || !pap.is_finite() {
                 break;
             }
