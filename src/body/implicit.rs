@@ -20,7 +20,7 @@
 use glam::{Mat3A, Vec3, Vec3A, Vec4};
 
 use super::coarse::CoarseSpace;
-use super::forces::{Model, add_gas_forces, external_forces};
+use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::Gas;
 use super::obstacles::{Obstacle, touching};
 use super::springs::{is_degenerate, spring_block_coefficients};
@@ -485,7 +485,7 @@ pub(crate) fn substep(
     let mut gas_dot_v = std::mem::take(&mut s.gas_dot_v);
     if let Some(gas) = gas.as_deref_mut() {
         s.gradient.resize(n, Vec3::ZERO);
-        add_gas_forces(model, gas, x, &mut s.gradient, &mut s.force);
+        add_gas_forces_parallel(model, pool, gas, x, &mut s.gradient, &mut s.force);
         let frags = gas.fragment_count();
         s.gas_coef.clear();
         s.gas_coef.extend((0..frags).map(|f| {

@@ -341,7 +341,7 @@ impl Body {
     fn energy_parts(&mut self) -> EnergyParts {
         let gas = match self.gas.as_mut() {
             Some(gas) => {
-                gas.measure(&self.nodes.x, &self.triangles, &self.face_fragment);
+                gas.measure_parallel(&self.pool, &self.nodes.x, &self.triangles, &self.face_fragment);
                 gas.energy()
             }
             None => 0.0,
