@@ -235,7 +235,9 @@ fn assemble_vertex(
     let (xi, vi) = (Vec3A::from(sys.x[i]), Vec3A::from(sys.v[i]));
     let mut f = Vec3A::from(force);
     let mut kv = Vec3A::ZERO;
-    let mut diag = Mat3A::from_diagonal(Vec3::splat(model.mass[i]));
+    // The diagonal block is `(m + Σ alpha) I + Σ w wᵀ`: the scalar part summed apart.
+    let mut diag = Mat3A::ZERO;
+    let mut diag_scalar = model.mass[i];
     let mut magnitude = model.mass[i] * model.settings.gravity.length();
     for ((slot, other), &(spring, j)) in coupling.iter_mut().zip(neighbor.iter_mut()).zip(model.springs.around(i)) {
         *other = j;
@@ -246,18 +248,21 @@ fn assemble_vertex(
             *slot = Coupling::default();
             continue;
         }
-        let u = d / len;
+        let u = d * len.recip();
         let dvel = Vec3A::from(sys.v[j as usize]) - vi;
         let stretch = ks * (len - rest);
-        f += u * (stretch + kd * dvel.dot(u));
+        let along = u.dot(dvel);
+        f += u * (stretch + kd * along);
         let (a, b) = spring_block_coefficients(len, rest, ks);
-        kv += (dvel * a + u * (b * u.dot(dvel))) * h2;
+        kv += (dvel * a + u * (b * along)) * h2;
         let (alpha, beta) = (h2 * a, h2 * b + h * kd);
         *slot = Coupling::new(u, alpha, beta);
         let w = slot.w();
-        diag += Mat3A::from_diagonal(Vec3::splat(alpha)) + outer(w, w);
+        diag += outer(w, w);
+        diag_scalar += alpha;
         magnitude += stretch.abs();
     }
+    diag += Mat3A::from_diagonal(Vec3::splat(diag_scalar));
     let mut rhs = f * h + kv;
     if let Some(frag) = sys.fragment(i) {
         let g = Vec3A::from(sys.gradient[i]);
