@@ -201,6 +201,7 @@ struct System<'a> {
     vertex_fragment: &'a [u32],
     gradient: &'a [Vec3],
     gas_coef: &'a [f64],
+    gas_pressure: &'a [f64],
 }
 
 impl System<'_> {
@@ -217,6 +218,9 @@ struct AssemblyTask<'a> {
     rhs: &'a mut [Vec3A],
     inv_diag: &'a mut [Mat3A],
     magnitude: &'a mut [f32],
+    /// Over the chunk: `Σ magnitude²` and `Σ |rhs|²`.
+    magnitude_squared: f64,
+    rhs_squared: f64,
 }
 
 /// Assembly of one vertex: spring forces and the right side `h f + h² K v`, the coupling blocks
@@ -268,6 +272,7 @@ fn assemble_vertex(
         let g = Vec3A::from(sys.gradient[i]);
         let coef = sys.gas_coef[frag];
         diag += outer(g * coef as f32, g);
+        magnitude += g.length() * sys.gas_pressure[frag].max(0.0) as f32;
         // -h² (P/V) g (g·v)
         rhs -= g * (coef * gas_dot_v[frag]) as f32;
     }
@@ -398,6 +403,50 @@ fn update_residual(
     tasks.iter().fold((0.0, 0.0), |(rr, rz), t| (rr + t.rr, rz + t.rz))
 }
 
+/// A chunk of the initial residual.
+struct InitialTask<'a> {
+    first: usize,
+    r: &'a mut [Vec3A],
+    z: &'a mut [Vec3A],
+    rz: f64,
+}
+
+/// `r = rhs - A Δv`, `z = M⁻¹ r` (both filtered by the contacts) in parallel chunks; returns `r·z`
+/// summed in chunk order.
+fn initial_residual(
+    pool: &WorkerPool,
+    (r, z): (&mut [Vec3A], &mut [Vec3A]),
+    rhs: &[Vec3A],
+    ap: &[Vec3A],
+    inv_diag: &[Mat3A],
+    contact: &[ContactFilter],
+    any_contact: bool,
+) -> f64 {
+    let mut tasks: Vec<InitialTask> = r
+        .chunks_mut(CHUNK)
+        .zip(z.chunks_mut(CHUNK))
+        .enumerate()
+        .map(|(c, (r, z))| InitialTask { first: c * CHUNK, r, z, rz: 0.0 })
+        .collect();
+    pool.for_each_task(&mut tasks, |t| {
+        let mut rz = 0.0f64;
+        for k in 0..t.r.len() {
+            let i = t.first + k;
+            let mut r = rhs[i] - ap[i];
+            let mut z = inv_diag[i] * r;
+            if any_contact {
+                r = contact[i].apply(r);
+                z = contact[i].apply(z);
+            }
+            t.r[k] = r;
+            t.z[k] = z;
+            rz += r.dot(z) as f64;
+        }
+        t.rz = rz;
+    });
+    tasks.iter().map(|t| t.rz).sum()
+}
+
 /// A chunk of the search direction update, with its part of `Σ g·p` per fragment.
 struct DirectionTask<'a> {
     first: usize,
@@ -509,11 +558,13 @@ pub(crate) fn substep(
         vertex_fragment: gas.as_deref().map_or(&no_gas[..], |g| &g.vertex_fragment),
         gradient: &s.gradient,
         gas_coef: &s.gas_coef,
+        gas_pressure: gas.as_deref().map_or(&[][..], |g| &g.pressure),
     };
     if gas.is_some() {
         gas_dots(&sys, |i| Vec3A::from(v[i]), &mut gas_dot_v);
     }
 
+    let (magnitude_squared, rhs_squared): (f64, f64);
     // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner. Per
     // vertex the springs are stiff along the surface and soft across it, which a diagonal (per
     // axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can.
@@ -530,7 +581,16 @@ pub(crate) fn substep(
             coupling = tail;
             let (neighbor_head, neighbor_tail) = std::mem::take(&mut neighbor).split_at_mut(len);
             neighbor = neighbor_tail;
-            tasks.push(AssemblyTask { first, coupling: head, neighbor: neighbor_head, rhs, inv_diag, magnitude });
+            tasks.push(AssemblyTask {
+                first,
+                coupling: head,
+                neighbor: neighbor_head,
+                rhs,
+                inv_diag,
+                magnitude,
+                magnitude_squared: 0.0,
+                rhs_squared: 0.0,
+            });
         }
         let force = &s.force;
         let gas_dot_v = &gas_dot_v;
@@ -551,17 +611,14 @@ pub(crate) fn substep(
                 t.rhs[k] = rhs;
                 t.inv_diag[k] = inv_diag;
                 t.magnitude[k] = magnitude;
+                t.magnitude_squared += (magnitude as f64) * (magnitude as f64);
+                t.rhs_squared += rhs.length_squared() as f64;
             }
         });
+        (magnitude_squared, rhs_squared) =
+            tasks.iter().fold((0.0, 0.0), |(m, r), t| (m + t.magnitude_squared, r + t.rhs_squared));
     }
     s.gas_dot_v = gas_dot_v;
-    if let Some(gas) = gas.as_deref() {
-        for (i, g) in s.gradient.iter().enumerate() {
-            if let Some(frag) = sys.fragment(i) {
-                s.magnitude[i] += g.length() * gas.pressure[frag].max(0.0) as f32;
-            }
-        }
-    }
 
     // Preconditioned conjugate gradients, warm-started from the previous substep's Δv (the
     // velocity change varies slowly from step to step), or on the first substep from the
@@ -622,18 +679,7 @@ pub(crate) fn substep(
         gas_dots(&sys, |i| s.dv[i], &mut gas_dot);
     }
     product(pool, &sys, &s.contact, (&s.coupling, &s.neighbor), &s.dv, &gas_dot, &mut s.ap);
-    let mut rz = 0.0f64;
-    for i in 0..n {
-        let mut r = s.rhs[i] - s.ap[i];
-        let mut z = s.inv_diag[i] * r;
-        if any_contact {
-            r = s.contact[i].apply(r);
-            z = s.contact[i].apply(z);
-        }
-        s.r[i] = r;
-        s.z[i] = z;
-        rz += r.dot(z) as f64;
-    }
+    let mut rz = initial_residual(pool, (&mut s.r, &mut s.z), &s.rhs, &s.ap, &s.inv_diag, &s.contact, any_contact);
     // The coarse level: made once (again only if the substep length changes; after a topology
     // change it is extended, not remade, so a cracking step costs no factorization).
     if s.coarse_h != h {
@@ -650,8 +696,8 @@ pub(crate) fn substep(
     s.p.fill(Vec3A::ZERO);
     update_direction(pool, &sys, &mut s.p, &s.z, coarse.as_ref(), &s.contact, 0.0, &mut gas_partial, fragments);
     sum_gas_partial(&gas_partial, &mut gas_dot);
-    let force_scale = h as f64 * s.magnitude.iter().map(|&m| (m as f64) * (m as f64)).sum::<f64>().sqrt();
-    let rhs_norm = s.rhs.iter().map(|r| r.length_squared() as f64).sum::<f64>().sqrt();
+    let force_scale = h as f64 * magnitude_squared.sqrt();
+    let rhs_norm = rhs_squared.sqrt();
     let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
     let mut iterations = 0;
     if r0 > 0.0 {
