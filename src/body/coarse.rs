@@ -183,3 +183,65 @@ impl CoarseSpace {
             + (self.restricted.capacity() + self.solution.capacity() + self.work.capacity()) * 16
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::settings::BodySettings;
+    use crate::body::springs::Springs;
+
+    /// A `side` x `side` grid of unit masses joined by springs along its rows and columns.
+    fn grid(side: usize) -> (Vec<Vec3>, Springs, Vec<f32>) {
+        let x: Vec<Vec3> = (0..side * side).map(|i| Vec3::new((i % side) as f32, (i / side) as f32, 0.0)).collect();
+        let mut springs = Springs::default();
+        for i in 0..side * side {
+            if i % side + 1 < side {
+                springs.ends.push([i as u32, i as u32 + 1]);
+            }
+            if i / side + 1 < side {
+                springs.ends.push([i as u32, (i + side) as u32]);
+            }
+        }
+        springs.rest = vec![1.0; springs.ends.len()];
+        springs.build_adjacency(x.len());
+        (x, springs, vec![1.0; side * side])
+    }
+
+    #[test]
+    fn aggregates_cover_every_vertex_and_the_coarse_operator_is_symmetric_positive() {
+        let (x, springs, mass) = grid(12);
+        let settings = BodySettings::default();
+        let model = Model {
+            settings: &settings,
+            triangles: &[],
+            face_fragment: &[],
+            springs: &springs,
+            mass: &mass,
+            inv_mass: &mass,
+        };
+        let mut coarse = CoarseSpace::new(&model, &x, 1.0 / 60.0).unwrap();
+        let n = x.len();
+        let count = coarse.restricted.len();
+        assert!(coarse.aggregate.iter().all(|&g| (g as usize) < count));
+        assert!(count > 1 && count <= n / 3, "{count} aggregates for {n} vertices");
+        // z = P A_c⁻¹ Pᵀ r: (a, P A_c⁻¹ Pᵀ b) = (b, P A_c⁻¹ Pᵀ a) and (a, P A_c⁻¹ Pᵀ a) > 0.
+        let pool = WorkerPool::new(1).unwrap();
+        let a: Vec<Vec3A> = (0..n).map(|i| Vec3A::new((i as f32).sin(), (i % 7) as f32 - 3.0, 1.0)).collect();
+        let b: Vec<Vec3A> = (0..n).map(|i| Vec3A::new((i as f32 * 0.3).cos(), 0.5, (i % 5) as f32)).collect();
+        let apply = |coarse: &mut CoarseSpace, r: &[Vec3A]| -> (f64, Vec<Vec3A>) {
+            let rz = coarse.solve(&pool, r);
+            (rz, (0..n).map(|i| coarse.correction(i)).collect())
+        };
+        let (aa, za) = apply(&mut coarse, &a);
+        let (_, zb) = apply(&mut coarse, &b);
+        let dot = |u: &[Vec3A], v: &[Vec3A]| u.iter().zip(v).map(|(p, q)| p.dot(*q) as f64).sum::<f64>();
+        assert!(aa > 0.0 && (aa - dot(&a, &za)).abs() < 1e-4 * aa);
+        let (ab, ba) = (dot(&a, &zb), dot(&b, &za));
+        assert!((ab - ba).abs() < 1e-4 * ab.abs().max(ba.abs()), "{ab} vs {ba}");
+        // A vertex appended by a split joins its origin's aggregate.
+        let mut origin: Vec<u32> = (0..n as u32).collect();
+        origin.push(17);
+        coarse.extend(&origin);
+        assert_eq!(coarse.aggregate[n], coarse.aggregate[17]);
+    }
+}
