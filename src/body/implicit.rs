@@ -86,6 +86,8 @@ pub(crate) struct ImplicitScratch {
     /// its other end (the products read these 20 bytes, not the 8-byte adjacency entry).
     coupling: Vec<Coupling>,
     neighbor: Vec<u32>,
+    /// Per spring, its share of the assembly.
+    spring_terms: Vec<SpringTerms>,
     rhs: Vec<Vec3A>,
     dv: Vec<Vec3A>,
     r: Vec<Vec3A>,
@@ -145,6 +147,7 @@ impl ImplicitScratch {
             + self.contact.capacity() * std::mem::size_of::<ContactFilter>()
             + self.coupling.capacity() * std::mem::size_of::<Coupling>()
             + self.neighbor.capacity() * 4
+            + self.spring_terms.capacity() * std::mem::size_of::<SpringTerms>()
             + (self.gas_coef.capacity()
                 + self.gas_dot_v.capacity()
                 + self.gas_dot.capacity()
@@ -223,10 +226,53 @@ struct AssemblyTask<'a> {
     rhs_squared: f64,
 }
 
-/// Assembly of one vertex: spring forces and the right side `h f + h² K v`, the coupling blocks
-/// of its springs, its diagonal block (inverted) and its force magnitude.
+/// One spring's share of the assembly, seen from its first end (`Springs::ends[k][0]`): the
+/// spring and damping force on it, its `h² K v` term and the coupling block, plus `|K_s (L - L0)|`
+/// for the force scale. The second end takes the vectors negated (`u` and the velocity
+/// difference both flip sign, so they are exactly the negated values) and the same block, so
+/// each spring is computed once, not once per end.
+#[derive(Clone, Copy, Default)]
+struct SpringTerms {
+    force: Vec3A,
+    kv: Vec3A,
+    coupling: Coupling,
+    stretch: f32,
+}
+
+/// Springs per parallel chunk of the spring pass.
+const SPRING_CHUNK: usize = 4096;
+
+/// The terms of spring `k` (SPEC 2.1 force and damping, the stiffness block of `springs`).
+fn spring_terms(sys: &System, k: usize) -> SpringTerms {
+    let model = sys.model;
+    let (ks, kd) = (model.settings.spring_stiffness, model.settings.spring_damping);
+    let (h, h2) = (sys.h, sys.h * sys.h);
+    let [i, j] = model.springs.ends[k];
+    let rest = model.springs.rest[k];
+    let d = Vec3A::from(sys.x[j as usize]) - Vec3A::from(sys.x[i as usize]);
+    let len = d.length();
+    if is_degenerate(len, rest) {
+        return SpringTerms::default();
+    }
+    let u = d * len.recip();
+    let dvel = Vec3A::from(sys.v[j as usize]) - Vec3A::from(sys.v[i as usize]);
+    let stretch = ks * (len - rest);
+    let along = u.dot(dvel);
+    let (a, b) = spring_block_coefficients(len, rest, ks);
+    let (alpha, beta) = (h2 * a, h2 * b + h * kd);
+    SpringTerms {
+        force: u * (stretch + kd * along),
+        kv: (dvel * a + u * (b * along)) * h2,
+        coupling: Coupling::new(u, alpha, beta),
+        stretch: stretch.abs(),
+    }
+}
+
+/// Assembly of one vertex from its springs' terms: the right side `h f + h² K v`, the coupling
+/// blocks of its springs, its diagonal block (inverted) and its force magnitude.
 fn assemble_vertex(
     sys: &System,
+    terms: &[SpringTerms],
     i: usize,
     force: Vec3,
     gas_dot_v: &[f64],
@@ -234,9 +280,7 @@ fn assemble_vertex(
     neighbor: &mut [u32],
 ) -> (Vec3A, Mat3A, f32) {
     let model = sys.model;
-    let (ks, kd) = (model.settings.spring_stiffness, model.settings.spring_damping);
-    let (h, h2) = (sys.h, sys.h * sys.h);
-    let (xi, vi) = (Vec3A::from(sys.x[i]), Vec3A::from(sys.v[i]));
+    let h = sys.h;
     let mut f = Vec3A::from(force);
     let mut kv = Vec3A::ZERO;
     // The diagonal block is `(m + Σ alpha) I + Σ w wᵀ`: the scalar part summed apart.
@@ -245,26 +289,15 @@ fn assemble_vertex(
     let mut magnitude = model.mass[i] * model.settings.gravity.length();
     for ((slot, other), &(spring, j)) in coupling.iter_mut().zip(neighbor.iter_mut()).zip(model.springs.around(i)) {
         *other = j;
-        let rest = model.springs.rest[spring as usize];
-        let d = Vec3A::from(sys.x[j as usize]) - xi;
-        let len = d.length();
-        if is_degenerate(len, rest) {
-            *slot = Coupling::default();
-            continue;
-        }
-        let u = d * len.recip();
-        let dvel = Vec3A::from(sys.v[j as usize]) - vi;
-        let stretch = ks * (len - rest);
-        let along = u.dot(dvel);
-        f += u * (stretch + kd * along);
-        let (a, b) = spring_block_coefficients(len, rest, ks);
-        kv += (dvel * a + u * (b * along)) * h2;
-        let (alpha, beta) = (h2 * a, h2 * b + h * kd);
-        *slot = Coupling::new(u, alpha, beta);
-        let w = slot.w();
+        let t = &terms[spring as usize];
+        let sign = if model.springs.ends[spring as usize][0] == i as u32 { 1.0 } else { -1.0 };
+        f += t.force * sign;
+        kv += t.kv * sign;
+        *slot = t.coupling;
+        let w = t.coupling.w();
         diag += outer(w, w);
-        diag_scalar += alpha;
-        magnitude += stretch.abs();
+        diag_scalar += t.coupling.0.w;
+        magnitude += t.stretch;
     }
     diag += Mat3A::from_diagonal(Vec3::splat(diag_scalar));
     let mut rhs = f * h + kv;
@@ -565,6 +598,13 @@ pub(crate) fn substep(
     }
 
     let (magnitude_squared, rhs_squared): (f64, f64);
+    // Each spring's terms once, then each vertex gathers its springs'.
+    s.spring_terms.resize(model.springs.len(), SpringTerms::default());
+    pool.for_each_chunk_mut(&mut s.spring_terms, SPRING_CHUNK, |c, chunk| {
+        for (k, t) in chunk.iter_mut().enumerate() {
+            *t = spring_terms(&sys, c * SPRING_CHUNK + k);
+        }
+    });
     // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner. Per
     // vertex the springs are stiff along the surface and soft across it, which a diagonal (per
     // axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can.
@@ -594,6 +634,7 @@ pub(crate) fn substep(
         }
         let force = &s.force;
         let gas_dot_v = &gas_dot_v;
+        let terms = &s.spring_terms;
         pool.for_each_task(&mut tasks, |t| {
             let mut cursor = 0;
             for k in 0..t.rhs.len() {
@@ -601,6 +642,7 @@ pub(crate) fn substep(
                 let count = model.springs.around(i).len();
                 let (rhs, inv_diag, magnitude) = assemble_vertex(
                     &sys,
+                    terms,
                     i,
                     force[i],
                     gas_dot_v,
