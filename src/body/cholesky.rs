@@ -236,7 +236,8 @@ impl Cholesky {
                 col_val64[p] = lkj;
                 cursor[j] += 1;
             }
-            if !(d > 0.0) || !d.is_finite() {
+            // Not positive (or NaN): A is not positive definite.
+            if d <= 0.0 || !d.is_finite() {
                 return None;
             }
             diag[k] = d.sqrt();

@@ -78,7 +78,7 @@ fn coarse_graph(offsets: &[u32], neighbors: &[u32], weights: &[f64], group: &[u3
             }
         }
     }
-    pairs.sort_unstable_by(|x, y| (x.0, x.1).cmp(&(y.0, y.1)));
+    pairs.sort_unstable_by_key(|&(a, b, _)| (a, b));
     let mut graph = CsrGraph { offsets: vec![0; count + 1], neighbors: Vec::new(), weights: Vec::new() };
     let mut k = 0;
     for a in 0..count {
@@ -153,9 +153,9 @@ impl CoarseSpace {
 
     /// A topology change appended vertices: each joins the aggregate of its `origin`.
     pub fn extend(&mut self, origin: &[u32]) {
-        for k in self.aggregate.len()..origin.len() {
-            let from = origin[k] as usize;
-            let group = self.aggregate.get(from).copied().unwrap_or(0);
+        let known = self.aggregate.len();
+        for &from in origin.iter().skip(known) {
+            let group = self.aggregate.get(from as usize).copied().unwrap_or(0);
             self.aggregate.push(group);
         }
     }
