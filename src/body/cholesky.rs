@@ -20,9 +20,10 @@ use crate::parallel::WorkerPool;
 /// Parts of the dissection with fewer vertices than this are not split further.
 const LEAF: usize = 48;
 
-/// Subtrees with fewer vertices than this are solved on one thread (smaller tasks cost more to
-/// hand out than they save).
-const PARALLEL_MIN: usize = 1500;
+/// Subtrees with fewer rows than this are solved on one thread: half of one (a few thousand
+/// entries of L, some microseconds) is about what handing a task to another thread costs. The
+/// coarse level of the balloon (642 rows, 17.7k entries) splits once.
+const PARALLEL_MIN: usize = 512;
 
 /// A node of the dissection tree: the new indices `start..end` are its two halves (`left`, then
 /// `right`) followed by its separator (`separator..end`). Leaves have no children.
