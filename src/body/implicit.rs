@@ -221,9 +221,61 @@ struct AssemblyTask<'a> {
     rhs: &'a mut [Vec3A],
     inv_diag: &'a mut [Mat3A],
     magnitude: &'a mut [f32],
-    /// Over the chunk: `Σ magnitude²` and `Σ |rhs|²`.
+    /// The start of the solve: Δv (the warm start) and the contact filters (empty without
+    /// obstacles).
+    dv: &'a mut [Vec3A],
+    contact: &'a mut [ContactFilter],
+    /// Over the chunk: `Σ magnitude²`, `Σ |rhs|²` and whether a contact holds.
     magnitude_squared: f64,
     rhs_squared: f64,
+    any_contact: bool,
+}
+
+/// The start of the solve at vertex i: Δv from the warm start `guess` and, if it rests on an
+/// obstacle, its contact filter, with `inv_diag` restricted to the contact's tangent plane.
+///
+/// Contacts inside the solve (Baraff and Witkin 1998, modified PCG): a vertex resting on an
+/// obstacle, moving and pushed into it, gets the constraint (v + Δv)·n = 0. Coulomb friction
+/// (SPEC 2.3) follows the solve, bounded by the normal speed the contact took away; restitution
+/// with the other integrators' contact response.
+#[allow(clippy::too_many_arguments)]
+fn start_vertex(
+    model: &Model,
+    obstacles: &[Obstacle],
+    i: usize,
+    x: Vec3,
+    v: Vec3,
+    rhs: Vec3A,
+    guess: Vec3A,
+    inv_diag: &mut Mat3A,
+) -> (Vec3A, ContactFilter) {
+    if model.inv_mass[i] == 0.0 {
+        return (Vec3A::ZERO, ContactFilter::Free);
+    }
+    let Some(normal) = (!obstacles.is_empty()).then(|| touching(x, obstacles, 1e-6)).flatten() else {
+        return (guess, ContactFilter::Free);
+    };
+    // Released when moving away or pulled away (the contact cannot pull).
+    if v.dot(normal) > 0.0 || Vec3::from(rhs).dot(normal) > 0.0 {
+        return (guess, ContactFilter::Free);
+    }
+    // The normal speed the contact takes away (per unit mass the normal impulse), to first
+    // order: what sliding friction may take off.
+    let alone = v + Vec3::from(rhs) * model.inv_mass[i];
+    let pushed = -alone.dot(normal);
+    let dv = Vec3::from(guess);
+    let dv = dv - normal * (dv.dot(normal) + v.dot(normal));
+    // Block Jacobi on the tangent plane: the inverse of the diagonal block restricted to it,
+    // `D⁻¹ - D⁻¹n nᵀD⁻¹ / (nᵀD⁻¹n)` (z = D⁻¹(r - λ n) with n·z = 0). Filtering the unrestricted
+    // inverse instead overstates the tangential response where springs couple the normal to the
+    // tangent (the rim of a contact patch) and stalls the iterations.
+    let n = Vec3A::from(normal);
+    let dn = *inv_diag * n;
+    let ndn = n.dot(dn);
+    if ndn > 0.0 {
+        *inv_diag -= outer(dn, dn / ndn);
+    }
+    (dv.into(), ContactFilter::Slide(normal, pushed.max(0.0)))
 }
 
 /// One spring's share of the assembly, seen from its first end (`Springs::ends[k][0]`): the
@@ -605,15 +657,36 @@ pub(crate) fn substep(
             *t = spring_terms(&sys, c * SPRING_CHUNK + k);
         }
     });
-    // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner. Per
+    // The warm start: the previous substep's Δv (the velocity change varies slowly from step
+    // to step), or on the first substep the free-fall guess Δv = h g: either solves the rigid
+    // translation, the mode that a Jacobi preconditioner dominated by stiff springs resolves
+    // worst.
+    if s.previous_dv.len() != n {
+        let g = Vec3A::from(model.settings.gravity * h);
+        s.previous_dv.clear();
+        s.previous_dv.resize(n, g);
+    }
+    s.contact.clear();
+    if !obstacles.is_empty() {
+        s.contact.resize(n, ContactFilter::Free);
+    }
+    // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner (per
     // vertex the springs are stiff along the surface and soft across it, which a diagonal (per
-    // axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can.
+    // axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can), then the
+    // start of the solve (warm start, contacts).
+    let any_contact;
     {
         let mut tasks = Vec::with_capacity(n.div_ceil(CHUNK));
         let mut coupling = &mut s.coupling[..];
         let mut neighbor = &mut s.neighbor[..];
-        let chunks = s.rhs.chunks_mut(CHUNK).zip(s.inv_diag.chunks_mut(CHUNK)).zip(s.magnitude.chunks_mut(CHUNK));
-        for (c, ((rhs, inv_diag), magnitude)) in chunks.enumerate() {
+        let mut contact = &mut s.contact[..];
+        let chunks = s
+            .rhs
+            .chunks_mut(CHUNK)
+            .zip(s.inv_diag.chunks_mut(CHUNK))
+            .zip(s.magnitude.chunks_mut(CHUNK))
+            .zip(s.dv.chunks_mut(CHUNK));
+        for (c, (((rhs, inv_diag), magnitude), dv)) in chunks.enumerate() {
             let first = c * CHUNK;
             let end = first + rhs.len();
             let len = (model.springs.offsets[end] - model.springs.offsets[first]) as usize;
@@ -621,6 +694,9 @@ pub(crate) fn substep(
             coupling = tail;
             let (neighbor_head, neighbor_tail) = std::mem::take(&mut neighbor).split_at_mut(len);
             neighbor = neighbor_tail;
+            let contact_len = if contact.is_empty() { 0 } else { rhs.len() };
+            let (contact_head, contact_tail) = std::mem::take(&mut contact).split_at_mut(contact_len);
+            contact = contact_tail;
             tasks.push(AssemblyTask {
                 first,
                 coupling: head,
@@ -628,19 +704,23 @@ pub(crate) fn substep(
                 rhs,
                 inv_diag,
                 magnitude,
+                dv,
+                contact: contact_head,
                 magnitude_squared: 0.0,
                 rhs_squared: 0.0,
+                any_contact: false,
             });
         }
         let force = &s.force;
         let gas_dot_v = &gas_dot_v;
         let terms = &s.spring_terms;
+        let previous_dv = &s.previous_dv;
         pool.for_each_task(&mut tasks, |t| {
             let mut cursor = 0;
             for k in 0..t.rhs.len() {
                 let i = t.first + k;
                 let count = model.springs.around(i).len();
-                let (rhs, inv_diag, magnitude) = assemble_vertex(
+                let (rhs, mut inv_diag, magnitude) = assemble_vertex(
                     &sys,
                     terms,
                     i,
@@ -650,71 +730,29 @@ pub(crate) fn substep(
                     &mut t.neighbor[cursor..cursor + count],
                 );
                 cursor += count;
+                let (dv, filter) = start_vertex(model, obstacles, i, x[i], v[i], rhs, previous_dv[i], &mut inv_diag);
                 t.rhs[k] = rhs;
                 t.inv_diag[k] = inv_diag;
                 t.magnitude[k] = magnitude;
+                t.dv[k] = dv;
+                if let Some(slot) = t.contact.get_mut(k) {
+                    *slot = filter;
+                    t.any_contact |= filter != ContactFilter::Free;
+                }
                 t.magnitude_squared += (magnitude as f64) * (magnitude as f64);
                 t.rhs_squared += rhs.length_squared() as f64;
             }
         });
         (magnitude_squared, rhs_squared) =
             tasks.iter().fold((0.0, 0.0), |(m, r), t| (m + t.magnitude_squared, r + t.rhs_squared));
+        any_contact = tasks.iter().any(|t| t.any_contact);
     }
     s.gas_dot_v = gas_dot_v;
+    if !any_contact {
+        s.contact.clear();
+    }
 
-    // Preconditioned conjugate gradients, warm-started from the previous substep's Δv (the
-    // velocity change varies slowly from step to step), or on the first substep from the
-    // free-fall guess Δv = h g: either solves the rigid translation, the mode that a Jacobi
-    // preconditioner dominated by stiff springs resolves worst.
-    if s.previous_dv.len() != n {
-        let g = Vec3A::from(model.settings.gravity * h);
-        s.previous_dv.clear();
-        s.previous_dv.resize(n, g);
-    }
-    for i in 0..n {
-        s.dv[i] = if model.inv_mass[i] == 0.0 { Vec3A::ZERO } else { s.previous_dv[i] };
-    }
-    // Contacts inside the solve (Baraff and Witkin 1998, modified PCG): a vertex resting on an
-    // obstacle, moving and pushed into it, gets the constraint (v + Δv)·n = 0. Coulomb friction
-    // (SPEC 2.3) follows the solve, bounded by the normal speed the contact took away; restitution
-    // with the other integrators' contact response.
-    s.contact.clear();
-    if !obstacles.is_empty() {
-        let mut any_contact = false;
-        s.contact.resize(n, ContactFilter::Free);
-        for i in 0..n {
-            if model.inv_mass[i] > 0.0 {
-                if let Some(normal) = touching(x[i], obstacles, 1e-6) {
-                    // Released when moving away or pulled away (the contact cannot pull).
-                    if v[i].dot(normal) <= 0.0 && Vec3::from(s.rhs[i]).dot(normal) <= 0.0 {
-                        any_contact = true;
-                        // The normal speed the contact takes away (per unit mass the normal
-                        // impulse), to first order: what sliding friction may take off.
-                        let alone = v[i] + Vec3::from(s.rhs[i]) * model.inv_mass[i];
-                        let pushed = -alone.dot(normal);
-                        s.contact[i] = ContactFilter::Slide(normal, pushed.max(0.0));
-                        let dv = Vec3::from(s.dv[i]);
-                        s.dv[i] = (dv - normal * (dv.dot(normal) + v[i].dot(normal))).into();
-                        // Block Jacobi on the tangent plane: the inverse of the diagonal block
-                        // restricted to it, `D⁻¹ - D⁻¹n nᵀD⁻¹ / (nᵀD⁻¹n)` (z = D⁻¹(r - λ n) with
-                        // n·z = 0). Filtering the unrestricted inverse instead overstates the
-                        // tangential response where springs couple the normal to the tangent
-                        // (the rim of a contact patch) and stalls the iterations.
-                        let n = Vec3A::from(normal);
-                        let dn = s.inv_diag[i] * n;
-                        let ndn = n.dot(dn);
-                        if ndn > 0.0 {
-                            s.inv_diag[i] -= outer(dn, dn / ndn);
-                        }
-                    }
-                }
-            }
-        }
-        if !any_contact {
-            s.contact.clear();
-        }
-    }
-    let any_contact = !s.contact.is_empty();
+    // Preconditioned conjugate gradients (modified PCG: every vector filtered by the contacts).
     let mut gas_dot = std::mem::take(&mut s.gas_dot);
     let mut gas_partial = std::mem::take(&mut s.gas_partial);
     if gas.is_some() {
@@ -729,7 +767,6 @@ pub(crate) fn substep(
         s.coarse_h = h;
     }
     let mut coarse = s.coarse.take();
-
     if let Some(c) = coarse.as_mut() {
         rz += c.solve(pool, &s.r);
     }
