@@ -830,6 +830,7 @@ pub(crate) fn substep(
     // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling term
     // of the matrix sums to zero); a truncated solve leaves a small error there, removed by a
     // uniform correction. Not with pins or contacts: their reactions are external forces.
+    let mut correction = Vec3A::ZERO;
     if !any_contact && model.inv_mass.iter().zip(model.mass).all(|(&w, &m)| w > 0.0 || m == 0.0) {
         let (mut error, mut mass) = (glam::DVec3::ZERO, 0.0f64);
         for i in 0..n {
@@ -837,28 +838,47 @@ pub(crate) fn substep(
             mass += model.mass[i] as f64;
         }
         if mass > 0.0 {
-            let correction = Vec3A::from((error / mass).as_vec3());
-            for dv in s.dv.iter_mut() {
-                *dv += correction;
-            }
+            correction = Vec3A::from((error / mass).as_vec3());
         }
     }
-    s.previous_dv.copy_from_slice(&s.dv);
-    for i in 0..n {
-        if model.inv_mass[i] == 0.0 {
-            continue;
-        }
-        v[i] += Vec3::from(s.dv[i]);
-        if let Some(&ContactFilter::Slide(normal, pushed)) = s.contact.get(i) {
-            // SPEC 2.3 Coulomb friction on a sliding contact: the tangential speed drops by at most
-            // `friction` times the normal speed change, never past zero.
-            let tangential = v[i] - normal * v[i].dot(normal);
-            let speed = tangential.length();
-            if speed > 0.0 {
-                v[i] -= tangential * ((model.settings.friction * pushed) / speed).min(1.0);
-            }
-        }
-        x[i] += v[i] * h;
+    // v += Δv, friction, x += h v, in parallel chunks.
+    struct FinalTask<'a> {
+        first: usize,
+        x: &'a mut [Vec3],
+        v: &'a mut [Vec3],
+        dv: &'a mut [Vec3A],
+        previous: &'a mut [Vec3A],
     }
+    let mut tasks: Vec<FinalTask> = x
+        .chunks_mut(CHUNK)
+        .zip(v.chunks_mut(CHUNK))
+        .zip(s.dv.chunks_mut(CHUNK))
+        .zip(s.previous_dv.chunks_mut(CHUNK))
+        .enumerate()
+        .map(|(c, (((x, v), dv), previous))| FinalTask { first: c * CHUNK, x, v, dv, previous })
+        .collect();
+    let contact = &s.contact;
+    pool.for_each_task(&mut tasks, |t| {
+        for k in 0..t.x.len() {
+            let i = t.first + k;
+            t.dv[k] += correction;
+            t.previous[k] = t.dv[k];
+            if model.inv_mass[i] == 0.0 {
+                continue;
+            }
+            let v = &mut t.v[k];
+            *v += Vec3::from(t.dv[k]);
+            if let Some(&ContactFilter::Slide(normal, pushed)) = contact.get(i) {
+                // SPEC 2.3 Coulomb friction on a sliding contact: the tangential speed drops by at
+                // most `friction` times the normal speed change, never past zero.
+                let tangential = *v - normal * v.dot(normal);
+                let speed = tangential.length();
+                if speed > 0.0 {
+                    *v -= tangential * ((model.settings.friction * pushed) / speed).min(1.0);
+                }
+            }
+            t.x[k] += *v * h;
+        }
+    });
     (power * h as f64, iterations)
 }
