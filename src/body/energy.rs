@@ -3,21 +3,32 @@
 
 use glam::Vec3;
 
-use super::springs::{Springs, spring_energy};
+use super::springs::{Springs, spring_energy, spring_strain};
+use crate::parallel::WorkerPool;
 
 /// Kinetic energy `Σ m v²/2`, J.
 pub(crate) fn kinetic(mass: &[f32], v: &[Vec3]) -> f64 {
     mass.iter().zip(v).map(|(&m, v)| 0.5 * m as f64 * v.as_dvec3().length_squared()).sum()
 }
 
-/// Spring energy, J.
-pub(crate) fn springs(springs: &Springs, x: &[Vec3], ks: f32) -> f64 {
-    springs
-        .ends
-        .iter()
-        .zip(&springs.rest)
-        .map(|(&[i, j], &rest)| spring_energy(x[i as usize], x[j as usize], rest, ks))
-        .sum()
+/// Springs per parallel chunk (fixed, so the sums do not depend on the thread count).
+const SPRING_CHUNK: usize = 4096;
+
+/// Spring energy (J) and the largest spring strain (0 when none is stretched), in one pass: the
+/// end-of-step stats need both (SPEC 2.5), and each needs every spring's length.
+pub(crate) fn springs_and_max_strain(pool: &WorkerPool, springs: &Springs, x: &[Vec3], ks: f32) -> (f64, f32) {
+    let chunks = springs.len().div_ceil(SPRING_CHUNK);
+    let parts = pool.map_collect(chunks, |c| {
+        let range = c * SPRING_CHUNK..((c + 1) * SPRING_CHUNK).min(springs.len());
+        let (mut energy, mut strain) = (0.0f64, 0.0f32);
+        for (&[i, j], &rest) in springs.ends[range.clone()].iter().zip(&springs.rest[range]) {
+            let (xi, xj) = (x[i as usize], x[j as usize]);
+            energy += spring_energy(xi, xj, rest, ks);
+            strain = strain.max(spring_strain(xi, xj, rest));
+        }
+        (energy, strain)
+    });
+    parts.iter().fold((0.0, 0.0f32), |(e, s), &(pe, ps)| (e + pe, s.max(ps)))
 }
 
 /// Gravitational energy `-Σ m g·x`, J.

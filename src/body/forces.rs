@@ -57,6 +57,24 @@ pub(crate) fn add_gas_forces(model: &Model, gas: &mut Gas, x: &[Vec3], gradient:
     }
 }
 
+/// [`add_gas_forces`] with the measurement in parallel on `pool` (the same forces).
+pub(crate) fn add_gas_forces_parallel(
+    model: &Model,
+    pool: &crate::parallel::WorkerPool,
+    gas: &mut Gas,
+    x: &[Vec3],
+    gradient: &mut [Vec3],
+    f: &mut [Vec3],
+) {
+    gas.measure_with_gradient_parallel(pool, x, model.triangles, model.face_fragment, gradient);
+    for (i, g) in gradient.iter().enumerate() {
+        let frag = gas.vertex_fragment[i];
+        if frag != u32::MAX {
+            f[i] += *g * gas.pressure[frag as usize] as f32;
+        }
+    }
+}
+
 /// Every force at (x, v) into `f`; returns the wind power.
 pub(crate) fn all_forces(
     model: &Model,

@@ -11,22 +11,45 @@
 //! right side, the block-Jacobi preconditioner and the coupling block of every (vertex, spring)
 //! pair, stored in that same order, so each product with the matrix streams through memory once.
 //! Both passes run in fixed chunks of vertices, so the result does not depend on the thread count.
+//!
+//! Preconditioner: two levels, added. The 3x3 block of each vertex (block Jacobi) resolves what
+//! happens at one vertex; the coarse level (`coarse`: aggregates of about 7 vertices, a constant
+//! scalar matrix factored once) moves whole patches, the smooth motions that block Jacobi alone
+//! leaves to many iterations. Both are filtered by the pins and contacts (modified PCG).
 
-use glam::{Mat3A, Vec3, Vec3A};
+use glam::{Mat3A, Vec3, Vec3A, Vec4};
 
-use super::forces::{Model, add_gas_forces, external_forces};
+use super::coarse::CoarseSpace;
+use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::Gas;
 use super::obstacles::{Obstacle, touching};
 use super::springs::{is_degenerate, spring_block_coefficients};
 use crate::parallel::WorkerPool;
 
 /// One spring seen from one of its ends: the block `alpha I + beta u uᵀ` of the system matrix
-/// that couples the two ends (`h²` times the stiffness block plus `h` times the damping).
+/// that couples the two ends (`h²` times the stiffness block plus `h` times the damping), held
+/// as `alpha I + w wᵀ` with `w = √beta u` (beta ≥ 0) in 16 bytes (w in x, y, z, alpha in the
+/// fourth lane): the products with the matrix stream this array, so its size is their speed.
 #[derive(Clone, Copy, Default)]
-struct Coupling {
-    u: Vec3A,
-    alpha: f32,
-    beta: f32,
+struct Coupling(Vec4);
+
+impl Coupling {
+    fn new(u: Vec3A, alpha: f32, beta: f32) -> Self {
+        Coupling((u * beta.max(0.0).sqrt()).extend(alpha))
+    }
+
+    /// `w` (the fourth lane is ignored by every Vec3A dot product and length).
+    #[inline(always)]
+    fn w(self) -> Vec3A {
+        Vec3A::from_vec4(self.0)
+    }
+
+    /// The block times `d`.
+    #[inline(always)]
+    fn apply(self, d: Vec3A) -> Vec3A {
+        let w = self.w();
+        d * self.0.w + w * w.dot(d)
+    }
 }
 
 /// How a vertex in contact with an obstacle is constrained inside the solve (Baraff and Witkin
@@ -59,8 +82,12 @@ pub(crate) struct ImplicitScratch {
     /// External and gas forces at the start of the substep (the springs are added per vertex).
     pub force: Vec<Vec3>,
     pub gradient: Vec<Vec3>,
-    /// Per entry of `Springs::adjacency`: the coupling block of that (vertex, spring) pair.
+    /// Per entry of `Springs::adjacency`: the coupling block of that (vertex, spring) pair, and
+    /// its other end (the products read these 20 bytes, not the 8-byte adjacency entry).
     coupling: Vec<Coupling>,
+    neighbor: Vec<u32>,
+    /// Per spring, its share of the assembly.
+    spring_terms: Vec<SpringTerms>,
     rhs: Vec<Vec3A>,
     dv: Vec<Vec3A>,
     r: Vec<Vec3A>,
@@ -76,10 +103,16 @@ pub(crate) struct ImplicitScratch {
     gas_coef: Vec<f64>,
     gas_dot_v: Vec<f64>,
     gas_dot: Vec<f64>,
+    /// Per chunk of vertices and per fragment, that chunk's part of `Σ g·p`.
+    gas_partial: Vec<f64>,
     /// Δv of the previous substep (the warm start), reset when the vertex count changes.
     previous_dv: Vec<Vec3A>,
     /// Contact constraint of each vertex (only with obstacles, and only while one touches).
     contact: Vec<ContactFilter>,
+    /// The coarse level of the preconditioner (made on the first substep) and the substep
+    /// length it was made (or tried) for.
+    coarse: Option<CoarseSpace>,
+    coarse_h: f32,
 }
 
 impl ImplicitScratch {
@@ -96,6 +129,9 @@ impl ImplicitScratch {
             let guess = if from < old { self.previous_dv[from] } else { Vec3A::ZERO };
             self.previous_dv.push(guess);
         }
+        if let Some(coarse) = self.coarse.as_mut() {
+            coarse.extend(origin);
+        }
     }
 
     pub fn memory_bytes(&self) -> usize {
@@ -110,9 +146,16 @@ impl ImplicitScratch {
                 * 16
             + self.contact.capacity() * std::mem::size_of::<ContactFilter>()
             + self.coupling.capacity() * std::mem::size_of::<Coupling>()
-            + (self.gas_coef.capacity() + self.gas_dot_v.capacity() + self.gas_dot.capacity()) * 8
+            + self.neighbor.capacity() * 4
+            + self.spring_terms.capacity() * std::mem::size_of::<SpringTerms>()
+            + (self.gas_coef.capacity()
+                + self.gas_dot_v.capacity()
+                + self.gas_dot.capacity()
+                + self.gas_partial.capacity())
+                * 8
             + self.magnitude.capacity() * 4
             + self.inv_diag.capacity() * std::mem::size_of::<Mat3A>()
+            + self.coarse.as_ref().map_or(0, CoarseSpace::memory_bytes)
     }
 }
 
@@ -161,6 +204,7 @@ struct System<'a> {
     vertex_fragment: &'a [u32],
     gradient: &'a [Vec3],
     gas_coef: &'a [f64],
+    gas_pressure: &'a [f64],
 }
 
 impl System<'_> {
@@ -173,52 +217,147 @@ impl System<'_> {
 struct AssemblyTask<'a> {
     first: usize,
     coupling: &'a mut [Coupling],
+    neighbor: &'a mut [u32],
     rhs: &'a mut [Vec3A],
     inv_diag: &'a mut [Mat3A],
     magnitude: &'a mut [f32],
+    /// The start of the solve: Δv (the warm start) and the contact filters (empty without
+    /// obstacles).
+    dv: &'a mut [Vec3A],
+    contact: &'a mut [ContactFilter],
+    /// Over the chunk: `Σ magnitude²`, `Σ |rhs|²` and whether a contact holds.
+    magnitude_squared: f64,
+    rhs_squared: f64,
+    any_contact: bool,
 }
 
-/// Assembly of one vertex: spring forces and the right side `h f + h² K v`, the coupling blocks
-/// of its springs, its diagonal block (inverted) and its force magnitude.
+/// The start of the solve at vertex i: Δv from the warm start `guess` and, if it rests on an
+/// obstacle, its contact filter, with `inv_diag` restricted to the contact's tangent plane.
+///
+/// Contacts inside the solve (Baraff and Witkin 1998, modified PCG): a vertex resting on an
+/// obstacle, moving and pushed into it, gets the constraint (v + Δv)·n = 0. Coulomb friction
+/// (SPEC 2.3) follows the solve, bounded by the normal speed the contact took away; restitution
+/// with the other integrators' contact response.
+#[allow(clippy::too_many_arguments)]
+fn start_vertex(
+    model: &Model,
+    obstacles: &[Obstacle],
+    i: usize,
+    x: Vec3,
+    v: Vec3,
+    rhs: Vec3A,
+    guess: Vec3A,
+    inv_diag: &mut Mat3A,
+) -> (Vec3A, ContactFilter) {
+    if model.inv_mass[i] == 0.0 {
+        return (Vec3A::ZERO, ContactFilter::Free);
+    }
+    let Some(normal) = (!obstacles.is_empty()).then(|| touching(x, obstacles, 1e-6)).flatten() else {
+        return (guess, ContactFilter::Free);
+    };
+    // Released when moving away or pulled away (the contact cannot pull).
+    if v.dot(normal) > 0.0 || Vec3::from(rhs).dot(normal) > 0.0 {
+        return (guess, ContactFilter::Free);
+    }
+    // The normal speed the contact takes away (per unit mass the normal impulse), to first
+    // order: what sliding friction may take off.
+    let alone = v + Vec3::from(rhs) * model.inv_mass[i];
+    let pushed = -alone.dot(normal);
+    let dv = Vec3::from(guess);
+    let dv = dv - normal * (dv.dot(normal) + v.dot(normal));
+    // Block Jacobi on the tangent plane: the inverse of the diagonal block restricted to it,
+    // `D⁻¹ - D⁻¹n nᵀD⁻¹ / (nᵀD⁻¹n)` (z = D⁻¹(r - λ n) with n·z = 0). Filtering the unrestricted
+    // inverse instead overstates the tangential response where springs couple the normal to the
+    // tangent (the rim of a contact patch) and stalls the iterations.
+    let n = Vec3A::from(normal);
+    let dn = *inv_diag * n;
+    let ndn = n.dot(dn);
+    if ndn > 0.0 {
+        *inv_diag -= outer(dn, dn / ndn);
+    }
+    (dv.into(), ContactFilter::Slide(normal, pushed.max(0.0)))
+}
+
+/// One spring's share of the assembly, seen from its first end (`Springs::ends[k][0]`): the
+/// spring and damping force on it, its `h² K v` term and the coupling block, plus `|K_s (L - L0)|`
+/// for the force scale. The second end takes the vectors negated (`u` and the velocity
+/// difference both flip sign, so they are exactly the negated values) and the same block, so
+/// each spring is computed once, not once per end.
+#[derive(Clone, Copy, Default)]
+struct SpringTerms {
+    force: Vec3A,
+    kv: Vec3A,
+    coupling: Coupling,
+    stretch: f32,
+}
+
+/// Springs per parallel chunk of the spring pass.
+const SPRING_CHUNK: usize = 4096;
+
+/// The terms of spring `k` (SPEC 2.1 force and damping, the stiffness block of `springs`).
+fn spring_terms(sys: &System, k: usize) -> SpringTerms {
+    let model = sys.model;
+    let (ks, kd) = (model.settings.spring_stiffness, model.settings.spring_damping);
+    let (h, h2) = (sys.h, sys.h * sys.h);
+    let [i, j] = model.springs.ends[k];
+    let rest = model.springs.rest[k];
+    let d = Vec3A::from(sys.x[j as usize]) - Vec3A::from(sys.x[i as usize]);
+    let len = d.length();
+    if is_degenerate(len, rest) {
+        return SpringTerms::default();
+    }
+    let u = d * len.recip();
+    let dvel = Vec3A::from(sys.v[j as usize]) - Vec3A::from(sys.v[i as usize]);
+    let stretch = ks * (len - rest);
+    let along = u.dot(dvel);
+    let (a, b) = spring_block_coefficients(len, rest, ks);
+    let (alpha, beta) = (h2 * a, h2 * b + h * kd);
+    SpringTerms {
+        force: u * (stretch + kd * along),
+        kv: (dvel * a + u * (b * along)) * h2,
+        coupling: Coupling::new(u, alpha, beta),
+        stretch: stretch.abs(),
+    }
+}
+
+/// Assembly of one vertex from its springs' terms: the right side `h f + h² K v`, the coupling
+/// blocks of its springs, its diagonal block (inverted) and its force magnitude.
 fn assemble_vertex(
     sys: &System,
+    terms: &[SpringTerms],
     i: usize,
     force: Vec3,
     gas_dot_v: &[f64],
     coupling: &mut [Coupling],
+    neighbor: &mut [u32],
 ) -> (Vec3A, Mat3A, f32) {
     let model = sys.model;
-    let (ks, kd) = (model.settings.spring_stiffness, model.settings.spring_damping);
-    let (h, h2) = (sys.h, sys.h * sys.h);
-    let (xi, vi) = (Vec3A::from(sys.x[i]), Vec3A::from(sys.v[i]));
+    let h = sys.h;
     let mut f = Vec3A::from(force);
     let mut kv = Vec3A::ZERO;
-    let mut diag = Mat3A::from_diagonal(Vec3::splat(model.mass[i]));
+    // The diagonal block is `(m + Σ alpha) I + Σ w wᵀ`: the scalar part summed apart.
+    let mut diag = Mat3A::ZERO;
+    let mut diag_scalar = model.mass[i];
     let mut magnitude = model.mass[i] * model.settings.gravity.length();
-    for (slot, &(spring, j)) in coupling.iter_mut().zip(model.springs.around(i)) {
-        let rest = model.springs.rest[spring as usize];
-        let d = Vec3A::from(sys.x[j as usize]) - xi;
-        let len = d.length();
-        if is_degenerate(len, rest) {
-            *slot = Coupling::default();
-            continue;
-        }
-        let u = d / len;
-        let dvel = Vec3A::from(sys.v[j as usize]) - vi;
-        let stretch = ks * (len - rest);
-        f += u * (stretch + kd * dvel.dot(u));
-        let (a, b) = spring_block_coefficients(len, rest, ks);
-        kv += (dvel * a + u * (b * u.dot(dvel))) * h2;
-        let (alpha, beta) = (h2 * a, h2 * b + h * kd);
-        *slot = Coupling { u, alpha, beta };
-        diag += Mat3A::from_diagonal(Vec3::splat(alpha)) + outer(u * beta, u);
-        magnitude += stretch.abs();
+    for ((slot, other), &(spring, j)) in coupling.iter_mut().zip(neighbor.iter_mut()).zip(model.springs.around(i)) {
+        *other = j;
+        let t = &terms[spring as usize];
+        let sign = if model.springs.ends[spring as usize][0] == i as u32 { 1.0 } else { -1.0 };
+        f += t.force * sign;
+        kv += t.kv * sign;
+        *slot = t.coupling;
+        let w = t.coupling.w();
+        diag += outer(w, w);
+        diag_scalar += t.coupling.0.w;
+        magnitude += t.stretch;
     }
+    diag += Mat3A::from_diagonal(Vec3::splat(diag_scalar));
     let mut rhs = f * h + kv;
     if let Some(frag) = sys.fragment(i) {
         let g = Vec3A::from(sys.gradient[i]);
         let coef = sys.gas_coef[frag];
         diag += outer(g * coef as f32, g);
+        magnitude += g.length() * sys.gas_pressure[frag].max(0.0) as f32;
         // -h² (P/V) g (g·v)
         rhs -= g * (coef * gas_dot_v[frag]) as f32;
     }
@@ -241,14 +380,13 @@ struct ProductTask<'a> {
 fn product_rows(
     sys: &System,
     contact: &[ContactFilter],
-    coupling: &[Coupling],
+    (coupling, neighbor): (&[Coupling], &[u32]),
     input: &[Vec3A],
     gas_dot: &[f64],
     task: &mut ProductTask,
 ) {
     let model = sys.model;
     let offsets = &model.springs.offsets;
-    let adjacency = &model.springs.adjacency;
     let mut dot = 0.0f64;
     for (k, o) in task.out.iter_mut().enumerate() {
         let i = task.first + k;
@@ -259,9 +397,8 @@ fn product_rows(
         let xi = input[i];
         let mut acc = xi * model.mass[i];
         let (start, end) = (offsets[i] as usize, offsets[i + 1] as usize);
-        for (c, &(_, j)) in coupling[start..end].iter().zip(&adjacency[start..end]) {
-            let d = xi - input[j as usize];
-            acc += d * c.alpha + c.u * (c.beta * c.u.dot(d));
+        for (c, &j) in coupling[start..end].iter().zip(&neighbor[start..end]) {
+            acc += c.apply(xi - input[j as usize]);
         }
         if let Some(frag) = sys.fragment(i) {
             acc += Vec3A::from(sys.gradient[i]) * (sys.gas_coef[frag] * gas_dot[frag]) as f32;
@@ -280,7 +417,7 @@ fn product(
     pool: &WorkerPool,
     sys: &System,
     contact: &[ContactFilter],
-    coupling: &[Coupling],
+    coupling: (&[Coupling], &[u32]),
     input: &[Vec3A],
     gas_dot: &[f64],
     out: &mut [Vec3A],
@@ -297,6 +434,165 @@ fn gas_dots(sys: &System, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
     for (i, g) in sys.gradient.iter().enumerate() {
         if let Some(frag) = sys.fragment(i) {
             out[frag] += Vec3A::from(*g).dot(value(i)) as f64;
+        }
+    }
+}
+
+/// A chunk of the residual update.
+struct ResidualTask<'a> {
+    first: usize,
+    dv: &'a mut [Vec3A],
+    r: &'a mut [Vec3A],
+    z: &'a mut [Vec3A],
+    rr: f64,
+    rz: f64,
+}
+
+/// `Δv += α p`, `r -= α A p`, `z = M⁻¹ r` (filtered by the contacts) in parallel chunks; returns
+/// `(r·r, r·z)` summed in chunk order.
+#[allow(clippy::too_many_arguments)]
+fn update_residual(
+    pool: &WorkerPool,
+    (dv, r, z): (&mut [Vec3A], &mut [Vec3A], &mut [Vec3A]),
+    p: &[Vec3A],
+    ap: &[Vec3A],
+    inv_diag: &[Mat3A],
+    contact: &[ContactFilter],
+    alpha: f32,
+    any_contact: bool,
+) -> (f64, f64) {
+    let mut tasks: Vec<ResidualTask> = dv
+        .chunks_mut(CHUNK)
+        .zip(r.chunks_mut(CHUNK))
+        .zip(z.chunks_mut(CHUNK))
+        .enumerate()
+        .map(|(c, ((dv, r), z))| ResidualTask { first: c * CHUNK, dv, r, z, rr: 0.0, rz: 0.0 })
+        .collect();
+    pool.for_each_task(&mut tasks, |t| {
+        let (mut rr, mut rz) = (0.0f64, 0.0f64);
+        for k in 0..t.dv.len() {
+            let i = t.first + k;
+            t.dv[k] += p[i] * alpha;
+            let r = t.r[k] - ap[i] * alpha;
+            let mut z = inv_diag[i] * r;
+            if any_contact {
+                z = contact[i].apply(z);
+            }
+            t.r[k] = r;
+            t.z[k] = z;
+            rr += r.length_squared() as f64;
+            rz += r.dot(z) as f64;
+        }
+        (t.rr, t.rz) = (rr, rz);
+    });
+    tasks.iter().fold((0.0, 0.0), |(rr, rz), t| (rr + t.rr, rz + t.rz))
+}
+
+/// A chunk of the initial residual.
+struct InitialTask<'a> {
+    first: usize,
+    r: &'a mut [Vec3A],
+    z: &'a mut [Vec3A],
+    rz: f64,
+}
+
+/// `r = rhs - A Δv`, `z = M⁻¹ r` (both filtered by the contacts) in parallel chunks; returns `r·z`
+/// summed in chunk order.
+fn initial_residual(
+    pool: &WorkerPool,
+    (r, z): (&mut [Vec3A], &mut [Vec3A]),
+    rhs: &[Vec3A],
+    ap: &[Vec3A],
+    inv_diag: &[Mat3A],
+    contact: &[ContactFilter],
+    any_contact: bool,
+) -> f64 {
+    let mut tasks: Vec<InitialTask> = r
+        .chunks_mut(CHUNK)
+        .zip(z.chunks_mut(CHUNK))
+        .enumerate()
+        .map(|(c, (r, z))| InitialTask { first: c * CHUNK, r, z, rz: 0.0 })
+        .collect();
+    pool.for_each_task(&mut tasks, |t| {
+        let mut rz = 0.0f64;
+        for k in 0..t.r.len() {
+            let i = t.first + k;
+            let mut r = rhs[i] - ap[i];
+            let mut z = inv_diag[i] * r;
+            if any_contact {
+                r = contact[i].apply(r);
+                z = contact[i].apply(z);
+            }
+            t.r[k] = r;
+            t.z[k] = z;
+            rz += r.dot(z) as f64;
+        }
+        t.rz = rz;
+    });
+    tasks.iter().map(|t| t.rz).sum()
+}
+
+/// A chunk of the search direction update, with its part of `Σ g·p` per fragment.
+struct DirectionTask<'a> {
+    first: usize,
+    p: &'a mut [Vec3A],
+    gas: &'a mut [f64],
+}
+
+/// `p = z + β p` in parallel chunks; each chunk leaves its `Σ g·p` per fragment in its part of
+/// `partial` (`fragments` entries per chunk).
+#[allow(clippy::too_many_arguments)]
+fn update_direction(
+    pool: &WorkerPool,
+    sys: &System,
+    p: &mut [Vec3A],
+    z: &[Vec3A],
+    coarse: Option<&CoarseSpace>,
+    contact: &[ContactFilter],
+    beta: f32,
+    partial: &mut [f64],
+    fragments: usize,
+) {
+    let mut gas_chunks = partial.chunks_mut(fragments.max(1));
+    let mut tasks: Vec<DirectionTask> = p
+        .chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(c, p)| DirectionTask {
+            first: c * CHUNK,
+            p,
+            gas: if fragments > 0 { gas_chunks.next().unwrap() } else { &mut [] },
+        })
+        .collect();
+    pool.for_each_task(&mut tasks, |t| {
+        t.gas.fill(0.0);
+        for k in 0..t.p.len() {
+            let i = t.first + k;
+            let mut zi = z[i];
+            if let Some(coarse) = coarse {
+                // The coarse correction, filtered like the rest of z.
+                if sys.model.inv_mass[i] > 0.0 {
+                    let c = coarse.correction(i);
+                    zi += contact.get(i).map_or(c, |f| f.apply(c));
+                }
+            }
+            let value = zi + t.p[k] * beta;
+            t.p[k] = value;
+            if let Some(frag) = sys.fragment(i) {
+                t.gas[frag] += Vec3A::from(sys.gradient[i]).dot(value) as f64;
+            }
+        }
+    });
+}
+
+/// `Σ g·p` per fragment from the chunks' parts (in chunk order).
+fn sum_gas_partial(partial: &[f64], gas_dot: &mut [f64]) {
+    if gas_dot.is_empty() {
+        return;
+    }
+    gas_dot.fill(0.0);
+    for part in partial.chunks_exact(gas_dot.len()) {
+        for (total, value) in gas_dot.iter_mut().zip(part) {
+            *total += value;
         }
     }
 }
@@ -322,12 +618,13 @@ pub(crate) fn substep(
     s.magnitude.resize(n, 0.0);
     s.inv_diag.resize(n, Mat3A::ZERO);
     s.coupling.resize(model.springs.adjacency.len(), Coupling::default());
+    s.neighbor.resize(model.springs.adjacency.len(), 0);
     let power = external_forces(model, x, v, &mut s.force);
     let h2 = h * h;
     let mut gas_dot_v = std::mem::take(&mut s.gas_dot_v);
     if let Some(gas) = gas.as_deref_mut() {
         s.gradient.resize(n, Vec3::ZERO);
-        add_gas_forces(model, gas, x, &mut s.gradient, &mut s.force);
+        add_gas_forces_parallel(model, pool, gas, x, &mut s.gradient, &mut s.force);
         let frags = gas.fragment_count();
         s.gas_coef.clear();
         s.gas_coef.extend((0..frags).map(|f| {
@@ -346,158 +643,194 @@ pub(crate) fn substep(
         vertex_fragment: gas.as_deref().map_or(&no_gas[..], |g| &g.vertex_fragment),
         gradient: &s.gradient,
         gas_coef: &s.gas_coef,
+        gas_pressure: gas.as_deref().map_or(&[][..], |g| &g.pressure),
     };
     if gas.is_some() {
         gas_dots(&sys, |i| Vec3A::from(v[i]), &mut gas_dot_v);
     }
 
-    // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner. Per
-    // vertex the springs are stiff along the surface and soft across it, which a diagonal (per
-    // axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can.
-    {
-        let mut tasks = Vec::with_capacity(n.div_ceil(CHUNK));
-        let mut coupling = &mut s.coupling[..];
-        let chunks = s.rhs.chunks_mut(CHUNK).zip(s.inv_diag.chunks_mut(CHUNK)).zip(s.magnitude.chunks_mut(CHUNK));
-        for (c, ((rhs, inv_diag), magnitude)) in chunks.enumerate() {
-            let first = c * CHUNK;
-            let end = first + rhs.len();
-            let len = (model.springs.offsets[end] - model.springs.offsets[first]) as usize;
-            let (head, tail) = std::mem::take(&mut coupling).split_at_mut(len);
-            coupling = tail;
-            tasks.push(AssemblyTask { first, coupling: head, rhs, inv_diag, magnitude });
+    let (magnitude_squared, rhs_squared): (f64, f64);
+    // Each spring's terms once, then each vertex gathers its springs'.
+    s.spring_terms.resize(model.springs.len(), SpringTerms::default());
+    pool.for_each_chunk_mut(&mut s.spring_terms, SPRING_CHUNK, |c, chunk| {
+        for (k, t) in chunk.iter_mut().enumerate() {
+            *t = spring_terms(&sys, c * SPRING_CHUNK + k);
         }
-        let force = &s.force;
-        let gas_dot_v = &gas_dot_v;
-        pool.for_each_task(&mut tasks, |t| {
-            let mut cursor = 0;
-            for k in 0..t.rhs.len() {
-                let i = t.first + k;
-                let count = model.springs.around(i).len();
-                let (rhs, inv_diag, magnitude) =
-                    assemble_vertex(&sys, i, force[i], gas_dot_v, &mut t.coupling[cursor..cursor + count]);
-                cursor += count;
-                t.rhs[k] = rhs;
-                t.inv_diag[k] = inv_diag;
-                t.magnitude[k] = magnitude;
-            }
-        });
-    }
-    s.gas_dot_v = gas_dot_v;
-    if let Some(gas) = gas.as_deref() {
-        for (i, g) in s.gradient.iter().enumerate() {
-            if let Some(frag) = sys.fragment(i) {
-                s.magnitude[i] += g.length() * gas.pressure[frag].max(0.0) as f32;
-            }
-        }
-    }
-
-    // Preconditioned conjugate gradients, warm-started from the previous substep's Δv (the
-    // velocity change varies slowly from step to step), or on the first substep from the
-    // free-fall guess Δv = h g: either solves the rigid translation, the mode that a Jacobi
-    // preconditioner dominated by stiff springs resolves worst.
+    });
+    // The warm start: the previous substep's Δv (the velocity change varies slowly from step
+    // to step), or on the first substep the free-fall guess Δv = h g: either solves the rigid
+    // translation, the mode that a Jacobi preconditioner dominated by stiff springs resolves
+    // worst.
     if s.previous_dv.len() != n {
         let g = Vec3A::from(model.settings.gravity * h);
         s.previous_dv.clear();
         s.previous_dv.resize(n, g);
     }
-    for i in 0..n {
-        s.dv[i] = if model.inv_mass[i] == 0.0 { Vec3A::ZERO } else { s.previous_dv[i] };
-    }
-    // Contacts inside the solve (Baraff and Witkin 1998, modified PCG): a vertex resting on an
-    // obstacle, moving and pushed into it, gets the constraint (v + Δv)·n = 0. Coulomb friction
-    // (SPEC 2.3) follows the solve, bounded by the normal speed the contact took away; restitution
-    // with the other integrators' contact response.
     s.contact.clear();
     if !obstacles.is_empty() {
-        let mut any_contact = false;
         s.contact.resize(n, ContactFilter::Free);
-        for i in 0..n {
-            if model.inv_mass[i] > 0.0 {
-                if let Some(normal) = touching(x[i], obstacles, 1e-6) {
-                    // Released when moving away or pulled away (the contact cannot pull).
-                    if v[i].dot(normal) <= 0.0 && Vec3::from(s.rhs[i]).dot(normal) <= 0.0 {
-                        any_contact = true;
-                        // The normal speed the contact takes away (per unit mass the normal
-                        // impulse), to first order: what sliding friction may take off.
-                        let alone = v[i] + Vec3::from(s.rhs[i]) * model.inv_mass[i];
-                        let pushed = -alone.dot(normal);
-                        s.contact[i] = ContactFilter::Slide(normal, pushed.max(0.0));
-                        let dv = Vec3::from(s.dv[i]);
-                        s.dv[i] = (dv - normal * (dv.dot(normal) + v[i].dot(normal))).into();
-                    }
-                }
-            }
-        }
-        if !any_contact {
-            s.contact.clear();
-        }
     }
-    let any_contact = !s.contact.is_empty();
+    // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner (per
+    // vertex the springs are stiff along the surface and soft across it, which a diagonal (per
+    // axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can), then the
+    // start of the solve (warm start, contacts).
+    let any_contact;
+    {
+        let mut tasks = Vec::with_capacity(n.div_ceil(CHUNK));
+        let mut coupling = &mut s.coupling[..];
+        let mut neighbor = &mut s.neighbor[..];
+        let mut contact = &mut s.contact[..];
+        let chunks = s
+            .rhs
+            .chunks_mut(CHUNK)
+            .zip(s.inv_diag.chunks_mut(CHUNK))
+            .zip(s.magnitude.chunks_mut(CHUNK))
+            .zip(s.dv.chunks_mut(CHUNK));
+        for (c, (((rhs, inv_diag), magnitude), dv)) in chunks.enumerate() {
+            let first = c * CHUNK;
+            let end = first + rhs.len();
+            let len = (model.springs.offsets[end] - model.springs.offsets[first]) as usize;
+            let (head, tail) = std::mem::take(&mut coupling).split_at_mut(len);
+            coupling = tail;
+            let (neighbor_head, neighbor_tail) = std::mem::take(&mut neighbor).split_at_mut(len);
+            neighbor = neighbor_tail;
+            let contact_len = if contact.is_empty() { 0 } else { rhs.len() };
+            let (contact_head, contact_tail) = std::mem::take(&mut contact).split_at_mut(contact_len);
+            contact = contact_tail;
+            tasks.push(AssemblyTask {
+                first,
+                coupling: head,
+                neighbor: neighbor_head,
+                rhs,
+                inv_diag,
+                magnitude,
+                dv,
+                contact: contact_head,
+                magnitude_squared: 0.0,
+                rhs_squared: 0.0,
+                any_contact: false,
+            });
+        }
+        let force = &s.force;
+        let gas_dot_v = &gas_dot_v;
+        let terms = &s.spring_terms;
+        let previous_dv = &s.previous_dv;
+        pool.for_each_task(&mut tasks, |t| {
+            let mut cursor = 0;
+            for k in 0..t.rhs.len() {
+                let i = t.first + k;
+                let count = model.springs.around(i).len();
+                let (rhs, mut inv_diag, magnitude) = assemble_vertex(
+                    &sys,
+                    terms,
+                    i,
+                    force[i],
+                    gas_dot_v,
+                    &mut t.coupling[cursor..cursor + count],
+                    &mut t.neighbor[cursor..cursor + count],
+                );
+                cursor += count;
+                let (dv, filter) = start_vertex(model, obstacles, i, x[i], v[i], rhs, previous_dv[i], &mut inv_diag);
+                t.rhs[k] = rhs;
+                t.inv_diag[k] = inv_diag;
+                t.magnitude[k] = magnitude;
+                t.dv[k] = dv;
+                if let Some(slot) = t.contact.get_mut(k) {
+                    *slot = filter;
+                    t.any_contact |= filter != ContactFilter::Free;
+                }
+                t.magnitude_squared += (magnitude as f64) * (magnitude as f64);
+                t.rhs_squared += rhs.length_squared() as f64;
+            }
+        });
+        (magnitude_squared, rhs_squared) =
+            tasks.iter().fold((0.0, 0.0), |(m, r), t| (m + t.magnitude_squared, r + t.rhs_squared));
+        any_contact = tasks.iter().any(|t| t.any_contact);
+    }
+    s.gas_dot_v = gas_dot_v;
+    if !any_contact {
+        s.contact.clear();
+    }
+
+    // Preconditioned conjugate gradients (modified PCG: every vector filtered by the contacts).
     let mut gas_dot = std::mem::take(&mut s.gas_dot);
+    let mut gas_partial = std::mem::take(&mut s.gas_partial);
     if gas.is_some() {
         gas_dots(&sys, |i| s.dv[i], &mut gas_dot);
     }
-    product(pool, &sys, &s.contact, &s.coupling, &s.dv, &gas_dot, &mut s.ap);
-    let mut rz = 0.0f64;
-    for i in 0..n {
-        let mut r = s.rhs[i] - s.ap[i];
-        let mut z = s.inv_diag[i] * r;
-        if any_contact {
-            r = s.contact[i].apply(r);
-            z = s.contact[i].apply(z);
-        }
-        s.r[i] = r;
-        s.z[i] = z;
-        rz += r.dot(z) as f64;
+    product(pool, &sys, &s.contact, (&s.coupling, &s.neighbor), &s.dv, &gas_dot, &mut s.ap);
+    let mut rz = initial_residual(pool, (&mut s.r, &mut s.z), &s.rhs, &s.ap, &s.inv_diag, &s.contact, any_contact);
+    // The coarse level: made once (again only if the substep length changes; after a topology
+    // change it is extended, not remade, so a cracking step costs no factorization).
+    if s.coarse_h != h {
+        s.coarse = CoarseSpace::new(model, x, h);
+        s.coarse_h = h;
     }
-    s.p.copy_from_slice(&s.z);
-    if gas.is_some() {
-        gas_dots(&sys, |i| s.p[i], &mut gas_dot);
+    let mut coarse = s.coarse.take();
+    if let Some(c) = coarse.as_mut() {
+        rz += c.solve(pool, &s.r);
     }
-    let force_scale = h as f64 * s.magnitude.iter().map(|&m| (m as f64) * (m as f64)).sum::<f64>().sqrt();
-    let rhs_norm = s.rhs.iter().map(|r| r.length_squared() as f64).sum::<f64>().sqrt();
+    let fragments = gas_dot.len();
+    gas_partial.resize(n.div_ceil(CHUNK) * fragments, 0.0);
+    s.p.fill(Vec3A::ZERO);
+    update_direction(pool, &sys, &mut s.p, &s.z, coarse.as_ref(), &s.contact, 0.0, &mut gas_partial, fragments);
+    sum_gas_partial(&gas_partial, &mut gas_dot);
+    let force_scale = h as f64 * magnitude_squared.sqrt();
+    let rhs_norm = rhs_squared.sqrt();
     let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
     let mut iterations = 0;
     if r0 > 0.0 {
         let tolerance = r0.powi(2);
         while iterations < max_iterations {
             iterations += 1;
-            let pap = product(pool, &sys, &s.contact, &s.coupling, &s.p, &gas_dot, &mut s.ap);
+            let pap = product(pool, &sys, &s.contact, (&s.coupling, &s.neighbor), &s.p, &gas_dot, &mut s.ap);
             if pap <= 0.0 || !pap.is_finite() {
                 break;
             }
             let alpha = (rz / pap) as f32;
-            // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass.
-            let (mut rr, mut rz_next) = (0.0f64, 0.0f64);
-            for i in 0..n {
-                s.dv[i] += s.p[i] * alpha;
-                let r = s.r[i] - s.ap[i] * alpha;
-                let mut z = s.inv_diag[i] * r;
-                if any_contact {
-                    z = s.contact[i].apply(z);
-                }
-                s.r[i] = r;
-                s.z[i] = z;
-                rr += r.length_squared() as f64;
-                rz_next += r.dot(z) as f64;
-            }
+            // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass, in
+            // parallel chunks whose sums are added in chunk order.
+            let (rr, rz_next) = update_residual(
+                pool,
+                (&mut s.dv, &mut s.r, &mut s.z),
+                &s.p,
+                &s.ap,
+                &s.inv_diag,
+                &s.contact,
+                alpha,
+                any_contact,
+            );
             if rr <= tolerance {
                 break;
             }
+            let mut rz_next = rz_next;
+            if let Some(c) = coarse.as_mut() {
+                rz_next += c.solve(pool, &s.r);
+            }
             let beta = (rz_next / rz) as f32;
             rz = rz_next;
-            for i in 0..n {
-                s.p[i] = s.z[i] + s.p[i] * beta;
-            }
-            if gas.is_some() {
-                gas_dots(&sys, |i| s.p[i], &mut gas_dot);
-            }
+            // p = z + β p, with Σ g·p per gas fragment in the same pass.
+            update_direction(
+                pool,
+                &sys,
+                &mut s.p,
+                &s.z,
+                coarse.as_ref(),
+                &s.contact,
+                beta,
+                &mut gas_partial,
+                fragments,
+            );
+            sum_gas_partial(&gas_partial, &mut gas_dot);
         }
     }
+    s.coarse = coarse;
+    s.gas_partial = gas_partial;
     s.gas_dot = gas_dot;
     // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling term
     // of the matrix sums to zero); a truncated solve leaves a small error there, removed by a
     // uniform correction. Not with pins or contacts: their reactions are external forces.
+    let mut correction = Vec3A::ZERO;
     if !any_contact && model.inv_mass.iter().zip(model.mass).all(|(&w, &m)| w > 0.0 || m == 0.0) {
         let (mut error, mut mass) = (glam::DVec3::ZERO, 0.0f64);
         for i in 0..n {
@@ -505,28 +838,47 @@ pub(crate) fn substep(
             mass += model.mass[i] as f64;
         }
         if mass > 0.0 {
-            let correction = Vec3A::from((error / mass).as_vec3());
-            for dv in s.dv.iter_mut() {
-                *dv += correction;
-            }
+            correction = Vec3A::from((error / mass).as_vec3());
         }
     }
-    s.previous_dv.copy_from_slice(&s.dv);
-    for i in 0..n {
-        if model.inv_mass[i] == 0.0 {
-            continue;
-        }
-        v[i] += Vec3::from(s.dv[i]);
-        if let Some(&ContactFilter::Slide(normal, pushed)) = s.contact.get(i) {
-            // SPEC 2.3 Coulomb friction on a sliding contact: the tangential speed drops by at most
-            // `friction` times the normal speed change, never past zero.
-            let tangential = v[i] - normal * v[i].dot(normal);
-            let speed = tangential.length();
-            if speed > 0.0 {
-                v[i] -= tangential * ((model.settings.friction * pushed) / speed).min(1.0);
-            }
-        }
-        x[i] += v[i] * h;
+    // v += Δv, friction, x += h v, in parallel chunks.
+    struct FinalTask<'a> {
+        first: usize,
+        x: &'a mut [Vec3],
+        v: &'a mut [Vec3],
+        dv: &'a mut [Vec3A],
+        previous: &'a mut [Vec3A],
     }
+    let mut tasks: Vec<FinalTask> = x
+        .chunks_mut(CHUNK)
+        .zip(v.chunks_mut(CHUNK))
+        .zip(s.dv.chunks_mut(CHUNK))
+        .zip(s.previous_dv.chunks_mut(CHUNK))
+        .enumerate()
+        .map(|(c, (((x, v), dv), previous))| FinalTask { first: c * CHUNK, x, v, dv, previous })
+        .collect();
+    let contact = &s.contact;
+    pool.for_each_task(&mut tasks, |t| {
+        for k in 0..t.x.len() {
+            let i = t.first + k;
+            t.dv[k] += correction;
+            t.previous[k] = t.dv[k];
+            if model.inv_mass[i] == 0.0 {
+                continue;
+            }
+            let v = &mut t.v[k];
+            *v += Vec3::from(t.dv[k]);
+            if let Some(&ContactFilter::Slide(normal, pushed)) = contact.get(i) {
+                // SPEC 2.3 Coulomb friction on a sliding contact: the tangential speed drops by at
+                // most `friction` times the normal speed change, never past zero.
+                let tangential = *v - normal * v.dot(normal);
+                let speed = tangential.length();
+                if speed > 0.0 {
+                    *v -= tangential * ((model.settings.friction * pushed) / speed).min(1.0);
+                }
+            }
+            t.x[k] += *v * h;
+        }
+    });
     (power * h as f64, iterations)
 }

@@ -13,6 +13,8 @@
 //!
 //! This module knows nothing of the C ABI.
 
+mod cholesky;
+mod coarse;
 mod core_block;
 mod crack;
 mod energy;

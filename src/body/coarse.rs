@@ -1,0 +1,247 @@
+//! The coarse level of the implicit integrator's preconditioner (SPEC 2.2): vertices grouped
+//! into small aggregates (a vertex and its neighbours), and the constant scalar matrix
+//! `Pᵀ (M + c (h² K_s + h K_d) L) P` of the aggregates, factored once. The block-Jacobi
+//! preconditioner resolves what happens at one vertex; this level moves whole patches at once,
+//! the smooth deformations (a resting ball carrying its weight to the contact patch, a bounce)
+//! that a one-vertex preconditioner leaves to many iterations.
+//!
+//! The matrix does not follow the springs' directions or a topology change: it only has to be
+//! positive definite to keep conjugate gradients correct, and near enough to the system to
+//! speed them up. A vertex added by a split joins the aggregate of the vertex it came from.
+
+use glam::{Vec3, Vec3A};
+
+use super::cholesky::Cholesky;
+use super::forces::Model;
+use crate::parallel::WorkerPool;
+
+/// Share of a spring's `h² K_s + h K_d` in the scalar matrix: a spring stiffens only along its
+/// direction, so a scalar matrix gets about half of it per axis for springs in a surface. On the
+/// issue-5 balloon (benches/body_balloon.rs, 200 steps on the ground) 0.4 to 0.65 give the same
+/// CG iterations (25 per step), 0.25 gives 34 and 1.0 gives 29.
+const SPRING_SHARE: f64 = 0.5;
+
+/// Aggregation passes: each groups the current nodes with their neighbours (about 7 to 1 on a
+/// triangle mesh). On the balloon one pass (about 1,500 aggregates) takes the CG iterations per
+/// step from 46 to 25 on the ground and from 13 to 5 without gravity; two passes (about 40
+/// vertices per aggregate) only to 37 and 12 (the coarse matrix then misses too much of the
+/// springs' stiffness inside each aggregate); three passes to 49.
+const PASSES: usize = 1;
+
+pub(crate) struct CoarseSpace {
+    /// Aggregate of each vertex.
+    aggregate: Vec<u32>,
+    factor: Cholesky,
+    restricted: Vec<Vec3A>,
+    solution: Vec<Vec3A>,
+    work: Vec<Vec3A>,
+}
+
+/// Groups the nodes of a graph (CSR `offsets`, `neighbors`): a node whose neighbours are all free
+/// starts an aggregate with them; the others join an aggregate of a neighbour; a node without
+/// any is alone. Returns the aggregate of each node and the count.
+fn aggregate(offsets: &[u32], neighbors: &[u32]) -> (Vec<u32>, usize) {
+    let n = offsets.len() - 1;
+    let free = u32::MAX;
+    let mut group = vec![free; n];
+    let mut count = 0u32;
+    let around = |i: usize| &neighbors[offsets[i] as usize..offsets[i + 1] as usize];
+    for i in 0..n {
+        if group[i] == free && around(i).iter().all(|&j| group[j as usize] == free) {
+            group[i] = count;
+            for &j in around(i) {
+                group[j as usize] = count;
+            }
+            count += 1;
+        }
+    }
+    for i in 0..n {
+        if group[i] == free {
+            group[i] = around(i).iter().map(|&j| group[j as usize]).find(|&g| g != free).unwrap_or_else(|| {
+                count += 1;
+                count - 1
+            });
+        }
+    }
+    (group, count as usize)
+}
+
+/// The graph between the aggregates of `group`: CSR offsets, neighbours and the number of
+/// edges between each pair.
+fn coarse_graph(offsets: &[u32], neighbors: &[u32], weights: &[f64], group: &[u32], count: usize) -> CsrGraph {
+    let mut pairs: Vec<(u32, u32, f64)> = Vec::new();
+    for i in 0..group.len() {
+        for p in offsets[i] as usize..offsets[i + 1] as usize {
+            let (a, b) = (group[i], group[neighbors[p] as usize]);
+            if a != b {
+                pairs.push((a, b, weights[p]));
+            }
+        }
+    }
+    pairs.sort_unstable_by_key(|&(a, b, _)| (a, b));
+    let mut graph = CsrGraph { offsets: vec![0; count + 1], neighbors: Vec::new(), weights: Vec::new() };
+    let mut k = 0;
+    for a in 0..count {
+        while k < pairs.len() && pairs[k].0 as usize == a {
+            let b = pairs[k].1;
+            let mut weight = 0.0;
+            while k < pairs.len() && pairs[k].0 as usize == a && pairs[k].1 == b {
+                weight += pairs[k].2;
+                k += 1;
+            }
+            graph.neighbors.push(b);
+            graph.weights.push(weight);
+        }
+        graph.offsets[a + 1] = graph.neighbors.len() as u32;
+    }
+    graph
+}
+
+struct CsrGraph {
+    offsets: Vec<u32>,
+    neighbors: Vec<u32>,
+    weights: Vec<f64>,
+}
+
+impl CoarseSpace {
+    /// Aggregates the vertices of `model` and factors the coarse matrix for substeps of `h`
+    /// (`x` places the aggregates for the ordering). None when the matrix cannot be factored.
+    pub fn new(model: &Model, x: &[Vec3], h: f32) -> Option<Self> {
+        let n = x.len();
+        let springs = &model.springs;
+        let mut graph = CsrGraph {
+            offsets: springs.offsets.clone(),
+            neighbors: springs.adjacency.iter().map(|&(_, j)| j).collect(),
+            weights: vec![1.0; springs.adjacency.len()],
+        };
+        let mut vertex_group: Vec<u32> = (0..n as u32).collect();
+        let mut count = n;
+        for _ in 0..PASSES {
+            let (group, c) = aggregate(&graph.offsets, &graph.neighbors);
+            graph = coarse_graph(&graph.offsets, &graph.neighbors, &graph.weights, &group, c);
+            for g in vertex_group.iter_mut() {
+                *g = group[*g as usize];
+            }
+            count = c;
+        }
+        let w = SPRING_SHARE
+            * ((h * h * model.settings.spring_stiffness) as f64 + (h * model.settings.spring_damping) as f64);
+        let mut diagonal = vec![0.0f64; count];
+        let mut center = vec![Vec3::ZERO; count];
+        let mut members = vec![0u32; count];
+        for i in 0..n {
+            let g = vertex_group[i] as usize;
+            diagonal[g] += model.mass[i] as f64;
+            center[g] += x[i];
+            members[g] += 1;
+        }
+        for (a, d) in diagonal.iter_mut().enumerate() {
+            let edges: f64 = graph.weights[graph.offsets[a] as usize..graph.offsets[a + 1] as usize].iter().sum();
+            *d += w * edges;
+            center[a] /= members[a].max(1) as f32;
+        }
+        let values: Vec<f64> = graph.weights.iter().map(|&e| -w * e).collect();
+        let factor = Cholesky::factor(&diagonal, &graph.offsets, &graph.neighbors, &values, &center)?;
+        Some(Self {
+            aggregate: vertex_group,
+            factor,
+            restricted: vec![Vec3A::ZERO; count],
+            solution: vec![Vec3A::ZERO; count],
+            work: Vec::new(),
+        })
+    }
+
+    /// A topology change appended vertices: each joins the aggregate of its `origin`.
+    pub fn extend(&mut self, origin: &[u32]) {
+        let known = self.aggregate.len();
+        for &from in origin.iter().skip(known) {
+            let group = self.aggregate.get(from as usize).copied().unwrap_or(0);
+            self.aggregate.push(group);
+        }
+    }
+
+    /// Solves the coarse system for the residual `r` (summed per aggregate); returns `r·(P x)`,
+    /// the coarse part of `r·z`.
+    pub fn solve(&mut self, pool: &WorkerPool, r: &[Vec3A]) -> f64 {
+        self.restricted.fill(Vec3A::ZERO);
+        for (ri, &g) in r.iter().zip(&self.aggregate) {
+            self.restricted[g as usize] += *ri;
+        }
+        self.factor.solve(pool, &self.restricted, &mut self.solution, &mut self.work);
+        self.restricted.iter().zip(&self.solution).map(|(a, b)| a.dot(*b) as f64).sum()
+    }
+
+    /// The coarse correction at vertex i (zero for a vertex it does not know).
+    #[inline]
+    pub fn correction(&self, i: usize) -> Vec3A {
+        self.aggregate.get(i).map_or(Vec3A::ZERO, |&g| self.solution[g as usize])
+    }
+
+    pub fn memory_bytes(&self) -> usize {
+        self.aggregate.capacity() * 4
+            + self.factor.memory_bytes()
+            + (self.restricted.capacity() + self.solution.capacity() + self.work.capacity()) * 16
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::settings::BodySettings;
+    use crate::body::springs::Springs;
+
+    /// A `side` x `side` grid of unit masses joined by springs along its rows and columns.
+    fn grid(side: usize) -> (Vec<Vec3>, Springs, Vec<f32>) {
+        let x: Vec<Vec3> = (0..side * side).map(|i| Vec3::new((i % side) as f32, (i / side) as f32, 0.0)).collect();
+        let mut springs = Springs::default();
+        for i in 0..side * side {
+            if i % side + 1 < side {
+                springs.ends.push([i as u32, i as u32 + 1]);
+            }
+            if i / side + 1 < side {
+                springs.ends.push([i as u32, (i + side) as u32]);
+            }
+        }
+        springs.rest = vec![1.0; springs.ends.len()];
+        springs.build_adjacency(x.len());
+        (x, springs, vec![1.0; side * side])
+    }
+
+    #[test]
+    fn aggregates_cover_every_vertex_and_the_coarse_operator_is_symmetric_positive() {
+        let (x, springs, mass) = grid(12);
+        let settings = BodySettings::default();
+        let model = Model {
+            settings: &settings,
+            triangles: &[],
+            face_fragment: &[],
+            springs: &springs,
+            mass: &mass,
+            inv_mass: &mass,
+        };
+        let mut coarse = CoarseSpace::new(&model, &x, 1.0 / 60.0).unwrap();
+        let n = x.len();
+        let count = coarse.restricted.len();
+        assert!(coarse.aggregate.iter().all(|&g| (g as usize) < count));
+        assert!(count > 1 && count <= n / 3, "{count} aggregates for {n} vertices");
+        // z = P A_c⁻¹ Pᵀ r: (a, P A_c⁻¹ Pᵀ b) = (b, P A_c⁻¹ Pᵀ a) and (a, P A_c⁻¹ Pᵀ a) > 0.
+        let pool = WorkerPool::new(1).unwrap();
+        let a: Vec<Vec3A> = (0..n).map(|i| Vec3A::new((i as f32).sin(), (i % 7) as f32 - 3.0, 1.0)).collect();
+        let b: Vec<Vec3A> = (0..n).map(|i| Vec3A::new((i as f32 * 0.3).cos(), 0.5, (i % 5) as f32)).collect();
+        let apply = |coarse: &mut CoarseSpace, r: &[Vec3A]| -> (f64, Vec<Vec3A>) {
+            let rz = coarse.solve(&pool, r);
+            (rz, (0..n).map(|i| coarse.correction(i)).collect())
+        };
+        let (aa, za) = apply(&mut coarse, &a);
+        let (_, zb) = apply(&mut coarse, &b);
+        let dot = |u: &[Vec3A], v: &[Vec3A]| u.iter().zip(v).map(|(p, q)| p.dot(*q) as f64).sum::<f64>();
+        assert!(aa > 0.0 && (aa - dot(&a, &za)).abs() < 1e-4 * aa);
+        let (ab, ba) = (dot(&a, &zb), dot(&b, &za));
+        assert!((ab - ba).abs() < 1e-4 * ab.abs().max(ba.abs()), "{ab} vs {ba}");
+        // A vertex appended by a split joins its origin's aggregate.
+        let mut origin: Vec<u32> = (0..n as u32).collect();
+        origin.push(17);
+        coarse.extend(&origin);
+        assert_eq!(coarse.aggregate[n], coarse.aggregate[17]);
+    }
+}
