@@ -17,15 +17,19 @@ use crate::parallel::WorkerPool;
 
 /// Share of a spring's `h² K_s + h K_d` in the scalar matrix: a spring stiffens only along its
 /// direction, so a scalar matrix gets about half of it per axis for springs in a surface. On the
-/// issue-5 balloon (benches/body_balloon.rs, 200 steps on the ground) 0.4 to 0.65 give the same
-/// CG iterations (25 per step), 0.25 gives 34 and 1.0 gives 29.
+/// issue-5 balloon (benches/body_balloon.rs, 200 steps on the ground, measured before the
+/// tangent-plane blocks at contacts) 0.4 to 0.65 give the same CG iterations (25 per step), 0.25
+/// gives 34 and 1.0 gives 29.
 const SPRING_SHARE: f64 = 0.5;
 
-/// Aggregation passes: each groups the current nodes with their neighbours (about 7 to 1 on a
-/// triangle mesh). On the balloon one pass (about 1,500 aggregates) takes the CG iterations per
-/// step from 46 to 25 on the ground and from 13 to 5 without gravity; two passes (about 40
-/// vertices per aggregate) only to 37 and 12 (the coarse matrix then misses too much of the
-/// springs' stiffness inside each aggregate); three passes to 49.
+/// Aggregation passes: each groups the current nodes into a node and its free neighbours, the
+/// leftovers joining a neighbouring group (about 16 to 1 on the balloon: 642 aggregates of its
+/// 10,242 vertices, 17.7k entries in the factor). Measured as above: one pass takes the CG
+/// iterations per step from 46 to 25 on the ground and from 13 to 5 without gravity; two passes
+/// only to 37 and 12 (the coarse matrix then misses too much of the springs' stiffness inside
+/// each aggregate); three passes to 49. Smaller aggregates (leftovers grouped among themselves:
+/// 2,121 of them) save under one iteration per step (7.2 to 6.4 with the contact blocks) and cost
+/// more than that in the coarse solve.
 const PASSES: usize = 1;
 
 pub(crate) struct CoarseSpace {

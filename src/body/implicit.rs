@@ -13,9 +13,11 @@
 //! Both passes run in fixed chunks of vertices, so the result does not depend on the thread count.
 //!
 //! Preconditioner: two levels, added. The 3x3 block of each vertex (block Jacobi) resolves what
-//! happens at one vertex; the coarse level (`coarse`: aggregates of about 7 vertices, a constant
+//! happens at one vertex; the coarse level (`coarse`: aggregates of about 16 vertices, a constant
 //! scalar matrix factored once) moves whole patches, the smooth motions that block Jacobi alone
-//! leaves to many iterations. Both are filtered by the pins and contacts (modified PCG).
+//! leaves to many iterations. Both are filtered by the pins and contacts (modified PCG); at a
+//! sliding contact the block is inverted on the tangent plane (`start_vertex`). On the issue-5
+//! balloon resting on the ground this took the solve from 70 to 7 CG iterations per step.
 
 use glam::{Mat3A, Vec3, Vec3A, Vec4};
 

@@ -95,7 +95,8 @@ impl Scratch {
 /// A mass-spring soft body with gas and fracture.
 pub struct Body {
     settings: BodySettings,
-    pool: WorkerPool,
+    /// Shared with the step's own closure, which runs inside it (see [`Body::step`]).
+    pool: std::sync::Arc<WorkerPool>,
     nodes: Nodes,
     saved_x: Vec<Vec3>,
     saved_v: Vec<Vec3>,
@@ -195,7 +196,7 @@ impl Body {
             Integrator::ImplicitEuler => Scratch::Implicit(ImplicitScratch::default()),
             Integrator::Xpbd => Scratch::Xpbd(XpbdScratch::default()),
         };
-        let pool = WorkerPool::new(settings.threads)?;
+        let pool = std::sync::Arc::new(WorkerPool::new(settings.threads)?);
         let mut body = Body {
             settings,
             pool,
@@ -403,6 +404,14 @@ impl Body {
     /// Advances one step (SPEC 2.5). On divergence the state is rolled back and an
     /// [`ErrorKind::Unstable`] error says what blew up and which time step would be stable.
     pub fn step(&mut self) -> Result<BodyStats> {
+        // The whole step runs inside the worker pool: each parallel loop in it is then a fork
+        // among the pool's own threads, not a hand-off from the caller's thread and back (tens
+        // of microseconds each, and a step has dozens). Serial pools run it on this thread.
+        let pool = std::sync::Arc::clone(&self.pool);
+        pool.install(|| self.step_in_pool())
+    }
+
+    fn step_in_pool(&mut self) -> Result<BodyStats> {
         let started = Instant::now();
         let substeps = self.settings.substeps.max(1);
         let h = self.settings.time_step / substeps as f32;
