@@ -253,23 +253,7 @@ impl Gas {
 
     /// The corners at each vertex (CSR, faces ascending).
     fn build_corners(&mut self, triangles: &[[u32; 3]], n: usize) {
-        let mut offsets = vec![0u32; n + 1];
-        for t in triangles {
-            for &v in t {
-                offsets[v as usize + 1] += 1;
-            }
-        }
-        for v in 0..n {
-            offsets[v + 1] += offsets[v];
-        }
-        let mut cursor = offsets.clone();
-        let mut corners = vec![0u32; offsets[n] as usize];
-        for (face, t) in triangles.iter().enumerate() {
-            for (c, &v) in t.iter().enumerate() {
-                corners[cursor[v as usize] as usize] = 3 * face as u32 + c as u32;
-                cursor[v as usize] += 1;
-            }
-        }
+        let (offsets, corners) = crate::mesh::vertex_incidence(n, triangles, |face, c| 3 * face as u32 + c as u32);
         self.corner_offsets = offsets;
         self.corners = corners;
     }

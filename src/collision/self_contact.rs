@@ -26,6 +26,7 @@ use super::bvh::{Aabb, Bvh};
 use super::ccd::{CcdSettings, Stage, edge_edge_with, vertex_triangle_with};
 use super::filters::V3;
 use super::hull_filter::{edge_edge_hulls_separated, vertex_triangle_hulls_separated};
+use crate::mesh::vertex_incidence;
 
 /// Projection rounds (projection, then re-check of the moved pairs) before the fail-safe.
 const ROUNDS: usize = 6;
@@ -226,28 +227,6 @@ fn swept_margin(thickness: f64) -> Vec3A {
     Vec3A::splat(if m.is_finite() { m } else { f32::INFINITY })
 }
 
-/// The primitives of each of `n` vertices, as (start, list) in CSR form.
-fn incidence<const N: usize>(n: usize, prims: &[[u32; N]]) -> (Vec<u32>, Vec<u32>) {
-    let mut start = vec![0u32; n + 1];
-    for prim in prims {
-        for &v in prim {
-            start[v as usize + 1] += 1;
-        }
-    }
-    for v in 0..n {
-        start[v + 1] += start[v];
-    }
-    let mut fill = start.clone();
-    let mut list = vec![0u32; start[n] as usize];
-    for (i, prim) in prims.iter().enumerate() {
-        for &v in prim {
-            list[fill[v as usize] as usize] = i as u32;
-            fill[v as usize] += 1;
-        }
-    }
-    (start, list)
-}
-
 /// Closest point of `p` on triangle `abc`: barycentric weights (α_a, α_b, α_c) (Ericson,
 /// "Real-Time Collision Detection" 5.1.5).
 pub(crate) fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
@@ -363,8 +342,8 @@ impl SelfContact {
             escaped: Vec::with_capacity(x.len()),
             query_stack: Vec::with_capacity(64),
             before: x.to_vec(),
-            vertex_edges: incidence(x.len(), edges),
-            vertex_faces: incidence(x.len(), triangles),
+            vertex_edges: vertex_incidence(x.len(), edges, |e, _| e as u32),
+            vertex_faces: vertex_incidence(x.len(), triangles, |f, _| f as u32),
             dirty_vertex: vec![false; x.len()],
             dirty_edge: vec![false; edges.len()],
             dirty_face: vec![false; triangles.len()],

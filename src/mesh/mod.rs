@@ -4,6 +4,7 @@
 //! This module knows nothing of the simulators or the C ABI; they build on it.
 
 mod curvature;
+mod incidence;
 mod measures;
 #[cfg(feature = "obj")]
 mod obj;
@@ -13,6 +14,7 @@ mod topology;
 mod tri_mesh;
 
 pub use curvature::{CurvatureKind, vertex_curvature};
+pub(crate) use incidence::vertex_incidence;
 pub use measures::{
     BoundingBox, bounding_box, face_area_vectors, signed_volume, signed_volume_f64, surface_area, triangle_min_angle,
     vertex_normals,
