@@ -159,8 +159,7 @@ struct LeafLanes {
 }
 
 impl LeafLanes {
-    const EMPTY: LeafLanes =
-        LeafLanes { lo: [[Vec4::INFINITY; 2]; 3], hi: [[Vec4::NEG_INFINITY; 2]; 3] };
+    const EMPTY: LeafLanes = LeafLanes { lo: [[Vec4::INFINITY; 2]; 3], hi: [[Vec4::NEG_INFINITY; 2]; 3] };
 
     fn set(&mut self, lane: usize, b: &Box32) {
         let (half, j) = (lane / 4, lane % 4);

@@ -25,7 +25,9 @@ use glam::{DVec3, Vec3, Vec3A};
 use super::bvh::{Aabb, Bvh};
 use super::ccd::{CcdSettings, Stage, edge_edge_with, vertex_triangle_with};
 use super::filters::V3;
-use super::hull_filter::{edge_edge_hulls_separated, vertex_triangle_hulls_separated};
+use super::hull_filter::{
+    diagonal_margin, diagonals_separated, edge_edge_hulls_separated, vertex_triangle_hulls_separated,
+};
 use crate::mesh::vertex_incidence;
 
 /// Projection rounds (projection, then re-check of the moved pairs) before the fail-safe.
@@ -43,7 +45,8 @@ pub struct ContactCounts {
     /// whose swept boxes come within the thickness (the cached BVH pairs that pass the exact
     /// swept-box test; the same pairs a BVH traversal over the swept boxes would give).
     pub candidates: u64,
-    /// Candidates left after the swept-hull separating-axis filter ([`super::hull_filter`]) and
+    /// Candidates left after the separating-axis filters on the swept hulls (the diagonal slabs,
+    /// then the closest-point directions, [`super::hull_filter`]) and
     /// the exact swept-box test of each pair.
     pub after_boxes: u64,
     /// Candidates left after the deforming non-penetration (plane) filter: exact tests run. A
@@ -634,6 +637,9 @@ impl SelfContact {
         self.hits.clear();
         self.update_swept_boxes(x0, x1, only_moved);
         let margin = swept_margin(thickness);
+        let largest = x0.iter().chain(x1.iter()).fold(0.0f32, |m, p| m.max(p.abs().max_element())) as f64;
+        let diagonal = diagonal_margin(thickness, largest);
+        let at = |x: &[Vec3], v: u32| Vec3A::from(x[v as usize]);
         let (vb, eb, fb) = (&self.vertex_swept, &self.edge_swept, &self.face_swept);
         // With `only_moved`: the primitives with a moved vertex.
         let (mv, me, mf) = (&self.dirty_vertex, &self.dirty_edge, &self.dirty_face);
@@ -674,6 +680,11 @@ impl SelfContact {
                 if t.contains(&v) || !wanted([v, t[0], t[1], t[2]]) {
                     return;
                 }
+                let face = [at(x0, t[0]), at(x0, t[1]), at(x0, t[2]), at(x1, t[0]), at(x1, t[1]), at(x1, t[2])];
+                if diagonals_separated(&[at(x0, v), at(x1, v)], &face, diagonal) {
+                    tally(None);
+                    return;
+                }
                 let start = [d(x0[v as usize]), d(x0[t[0] as usize]), d(x0[t[1] as usize]), d(x0[t[2] as usize])];
                 let end = [d(x1[v as usize]), d(x1[t[0] as usize]), d(x1[t[1] as usize]), d(x1[t[2] as usize])];
                 if vertex_triangle_hulls_separated(&start, &end, thickness) {
@@ -694,6 +705,11 @@ impl SelfContact {
                     return;
                 }
                 if a == c || a == e || b == c || b == e || !wanted([a, b, c, e]) {
+                    return;
+                }
+                let first = [at(x0, a), at(x0, b), at(x1, a), at(x1, b)];
+                if diagonals_separated(&first, &[at(x0, c), at(x0, e), at(x1, c), at(x1, e)], diagonal) {
+                    tally(None);
                     return;
                 }
                 let start = [d(x0[a as usize]), d(x0[b as usize]), d(x0[c as usize]), d(x0[e as usize])];
