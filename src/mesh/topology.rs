@@ -349,6 +349,9 @@ impl Topology {
     }
 }
 
+#[path = "topology_update.rs"]
+mod update;
+
 #[cfg(test)]
 #[path = "topology_reference.rs"]
 mod reference;
@@ -361,6 +364,15 @@ mod tests {
     fn assert_same_as_reference(triangles: &[[u32; 3]], vertex_count: usize, what: &str) -> Topology {
         let fast = Topology::build(triangles, vertex_count);
         let slow = Topology::build_reference(triangles, vertex_count);
+        assert_same(&fast, &slow, what);
+        for v in 0..vertex_count as u32 {
+            let pinch = fast.fan_count(triangles, v) > 1;
+            assert_eq!(pinch, fast.non_manifold_vertices.binary_search(&v).is_ok(), "{what}: fan count of {v}");
+        }
+        fast
+    }
+
+    fn assert_same(fast: &Topology, slow: &Topology, what: &str) {
         assert_eq!(fast.edges, slow.edges, "{what}: edges");
         assert_eq!(fast.edge_faces, slow.edge_faces, "{what}: edge_faces");
         assert_eq!(fast.edge_face_count, slow.edge_face_count, "{what}: edge_face_count");
@@ -373,11 +385,6 @@ mod tests {
         assert_eq!(fast.face_components, slow.face_components, "{what}: face_components");
         assert_eq!(fast.component_count, slow.component_count, "{what}: component_count");
         assert_eq!(fast.referenced_vertices, slow.referenced_vertices, "{what}: referenced_vertices");
-        for v in 0..vertex_count as u32 {
-            let pinch = fast.fan_count(triangles, v) > 1;
-            assert_eq!(pinch, fast.non_manifold_vertices.binary_search(&v).is_ok(), "{what}: fan count of {v}");
-        }
-        fast
     }
 
     /// The triangles and vertex count of an OBJ file of data/ (`v` and `f` lines).
@@ -398,6 +405,54 @@ mod tests {
                 }
                 _ => {}
             }
+        }
+        (triangles, vertices)
+    }
+
+    /// A random mesh: a torus grid with holes, flips, pinches (vertices merged), degenerate
+    /// triangles, duplicated faces (non-manifold edges), stray triangles, unused vertices, and
+    /// sometimes a separate tetrahedron and a fan of many faces around one vertex.
+    fn random_mesh(rng: &mut Rng, case: usize) -> (Vec<[u32; 3]>, u32) {
+        let (nu, nv) = (3 + rng.below(6), 3 + rng.below(6));
+        let mut triangles = torus(nu, nv);
+        let mut vertices = nu * nv + rng.below(4);
+        triangles.retain(|_| rng.below(8) != 0);
+        for t in triangles.iter_mut() {
+            match rng.below(30) {
+                0 => t.swap(0, 1),
+                1 => t[2] = t[0],
+                2 => t[1] = t[2],
+                3 => *t = [t[0]; 3],
+                4 => t[rng.below(3) as usize] = rng.below(vertices),
+                _ => {}
+            }
+        }
+        for _ in 0..rng.below(3) {
+            let (from, to) = (rng.below(vertices), rng.below(vertices));
+            for t in triangles.iter_mut() {
+                t.iter_mut().filter(|c| **c == from).for_each(|c| *c = to);
+            }
+        }
+        for _ in 0..rng.below(4) {
+            if !triangles.is_empty() {
+                let copy = triangles[rng.below(triangles.len() as u32) as usize];
+                triangles.push(if rng.below(2) == 0 { copy } else { [copy[0], copy[2], copy[1]] });
+            }
+            triangles.push([rng.below(vertices), rng.below(vertices), rng.below(vertices)]);
+        }
+        if case % 3 == 1 {
+            // A separate closed piece.
+            triangles.extend(TETRA.iter().map(|t| t.map(|v| v + vertices)));
+            vertices += 4;
+        }
+        if case % 10 == 0 {
+            // A fan of many faces around one vertex: its bucket takes the library sort.
+            let hub = vertices;
+            let ring = 40 + rng.below(40);
+            for k in 0..ring {
+                triangles.push([hub, hub + 1 + k, hub + 1 + (k + 1) % ring]);
+            }
+            vertices += ring + 1;
         }
         (triangles, vertices)
     }
@@ -453,49 +508,7 @@ mod tests {
         // degenerate sides, several components.
         let mut seen = [0; 6];
         for case in 0..300 {
-            // A torus grid with holes, flips, pinches (vertices merged), degenerate triangles,
-            // duplicated faces (non-manifold edges), stray triangles and unused vertices.
-            let (nu, nv) = (3 + rng.below(6), 3 + rng.below(6));
-            let mut triangles = torus(nu, nv);
-            let mut vertices = nu * nv + rng.below(4);
-            triangles.retain(|_| rng.below(8) != 0);
-            for t in triangles.iter_mut() {
-                match rng.below(30) {
-                    0 => t.swap(0, 1),
-                    1 => t[2] = t[0],
-                    2 => t[1] = t[2],
-                    3 => *t = [t[0]; 3],
-                    4 => t[rng.below(3) as usize] = rng.below(vertices),
-                    _ => {}
-                }
-            }
-            for _ in 0..rng.below(3) {
-                let (from, to) = (rng.below(vertices), rng.below(vertices));
-                for t in triangles.iter_mut() {
-                    t.iter_mut().filter(|c| **c == from).for_each(|c| *c = to);
-                }
-            }
-            for _ in 0..rng.below(4) {
-                if !triangles.is_empty() {
-                    let copy = triangles[rng.below(triangles.len() as u32) as usize];
-                    triangles.push(if rng.below(2) == 0 { copy } else { [copy[0], copy[2], copy[1]] });
-                }
-                triangles.push([rng.below(vertices), rng.below(vertices), rng.below(vertices)]);
-            }
-            if case % 3 == 1 {
-                // A separate closed piece.
-                triangles.extend(TETRA.iter().map(|t| t.map(|v| v + vertices)));
-                vertices += 4;
-            }
-            if case % 10 == 0 {
-                // A fan of many faces around one vertex: its bucket takes the library sort.
-                let hub = vertices;
-                let ring = 40 + rng.below(40);
-                for k in 0..ring {
-                    triangles.push([hub, hub + 1 + k, hub + 1 + (k + 1) % ring]);
-                }
-                vertices += ring + 1;
-            }
+            let (triangles, vertices) = random_mesh(&mut rng, case);
             let t = assert_same_as_reference(&triangles, vertices as usize, &format!("random case {case}"));
             let features = [
                 !t.non_manifold_vertices.is_empty(),
@@ -513,6 +526,62 @@ mod tests {
         assert!(seen.iter().all(|&c| c >= 30), "each feature must show up in many cases: {seen:?}");
         assert_same_as_reference(&[], 0, "empty");
         assert_same_as_reference(&[], 5, "no faces");
+    }
+
+    /// Cracks: corners of whole fans re-instanced with new vertices (as the fracture does).
+    fn split_some_fans(rng: &mut Rng, topology: &Topology, triangles: &mut [[u32; 3]], vertices: &mut u32) {
+        let known = topology.vertex_face_offsets.len() as u32 - 1;
+        for _ in 0..1 + rng.below(6) {
+            let v = rng.below(known);
+            let faces = topology.faces_of_vertex(v).to_vec();
+            if faces.is_empty() {
+                continue;
+            }
+            let copy = *vertices;
+            *vertices += 1 + rng.below(2);
+            for &f in faces.iter().filter(|_| rng.below(2) == 0) {
+                triangles[f as usize].iter_mut().filter(|c| **c == v).for_each(|c| *c = copy);
+            }
+        }
+    }
+
+    #[test]
+    fn update_gives_the_same_as_a_new_build() {
+        let mut rng = Rng(777);
+        for case in 0..300 {
+            let (mut triangles, mut vertices) = random_mesh(&mut rng, case);
+            let mut topology = Topology::build(&triangles, vertices as usize);
+            for round in 0..4 {
+                let old = triangles.clone();
+                match rng.below(4) {
+                    0 => split_some_fans(&mut rng, &topology, &mut triangles, &mut vertices),
+                    1 => {
+                        // Random corners anywhere, some faces appended (core blocks), new vertices.
+                        for _ in 0..rng.below(5) {
+                            if !triangles.is_empty() {
+                                let f = rng.below(triangles.len() as u32) as usize;
+                                triangles[f][rng.below(3) as usize] = rng.below(vertices + 2);
+                            }
+                        }
+                        for _ in 0..rng.below(4) {
+                            triangles.push([rng.below(vertices + 2), rng.below(vertices + 2), vertices + rng.below(2)]);
+                        }
+                        vertices += 2;
+                    }
+                    2 => vertices += rng.below(3), // only new (unused) vertices
+                    _ => split_some_fans(&mut rng, &topology, &mut triangles, &mut vertices),
+                }
+                topology.update(&old, &triangles, vertices as usize);
+                let built = Topology::build(&triangles, vertices as usize);
+                assert_same(&topology, &built, &format!("case {case}, round {round}"));
+            }
+        }
+        let (triangles, vertices) = read_obj("kitten.obj");
+        let mut topology = Topology::build(&triangles, vertices);
+        let (mut cracked, mut count) = (triangles.clone(), vertices as u32);
+        split_some_fans(&mut rng, &topology, &mut cracked, &mut count);
+        topology.update(&triangles, &cracked, count as usize);
+        assert_same(&topology, &Topology::build(&cracked, count as usize), "kitten cracked");
     }
 
     const TETRA: [[u32; 3]; 4] = [[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]];
