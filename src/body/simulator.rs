@@ -638,11 +638,13 @@ impl Body {
 
     /// Breaks the springs `pairs` (vertex pairs of current springs) and releases the core blocks
     /// of `cores`, then rebuilds springs, fragments and gas. The one place where topology changes.
+    /// The kept topology is brought up to date after each kind of change (only around the faces
+    /// that changed), never built again from scratch.
     fn change_topology(&mut self, pairs: &[[u32; 2]], cores: &[u32]) -> u64 {
         let n = self.nodes.len();
         let t = Instant::now();
         let fracture = self.fracture.get_or_insert_with(|| Fracture::new(n, self.triangles.len()));
-        let old_face_fragment = self.face_fragment.clone();
+        let old_face_fragment = std::mem::take(&mut self.face_fragment);
         let mut topology = self.topology.take().unwrap_or_else(|| Topology::build(&self.triangles, n));
         trace_phase("start", t);
         let t = Instant::now();
@@ -658,24 +660,32 @@ impl Body {
             let mut vertices: Vec<u32> = pairs.iter().flatten().copied().collect();
             vertices.sort_unstable();
             vertices.dedup();
-            crack::split_fans(fracture, &topology, &mut self.triangles, &mut self.nodes, &vertices);
+            let before = self.triangles.clone();
+            if crack::split_fans(fracture, &topology, &mut self.triangles, &mut self.nodes, &vertices) > 0 {
+                topology.update(&before, &self.triangles, self.nodes.len());
+            }
         }
         trace_phase("cracks", t);
         let t = Instant::now();
         let mut released = 0;
         if !cores.is_empty() {
-            if !pairs.is_empty() {
-                topology = Topology::build(&self.triangles, self.nodes.len());
-            }
+            let before = self.triangles.clone();
             let mut touched = vec![false; self.nodes.len()];
             for &v in cores {
                 if core_block::release(fracture, &topology, &mut self.triangles, &mut self.nodes, &mut touched, v) {
                     released += 1;
                 }
             }
+            if released > 0 {
+                topology.update(&before, &self.triangles, self.nodes.len());
+            }
         }
         trace_phase("cores", t);
-        self.rebuild(&old_face_fragment);
+        debug_assert!(
+            topology == Topology::build(&self.triangles, self.nodes.len()),
+            "the updated topology differs from a new build"
+        );
+        self.rebuild(topology, &old_face_fragment);
         let t = Instant::now();
         if let (Scratch::Implicit(s), Some(fracture)) = (&mut self.scratch, self.fracture.as_ref()) {
             s.extend_warm_start(&fracture.origin);
@@ -684,12 +694,10 @@ impl Body {
         released
     }
 
-    /// Rebuilds springs, fragments and gas after a topology change; bumps the generation.
-    fn rebuild(&mut self, old_face_fragment: &[u32]) {
+    /// Rebuilds springs, fragments and gas after a topology change (`topology` is that of the
+    /// current triangles); bumps the generation.
+    fn rebuild(&mut self, topology: Topology, old_face_fragment: &[u32]) {
         let n = self.nodes.len();
-        let t = Instant::now();
-        let topology = Topology::build(&self.triangles, n);
-        trace_phase("rebuild: topology", t);
         let t = Instant::now();
         self.springs = build_springs(&topology, self.fracture.as_ref(), &self.nodes.rest);
         trace_phase("rebuild: springs", t);

@@ -9,7 +9,7 @@
 pub(crate) const NO_FACE: u32 = u32::MAX;
 
 /// Connectivity of a triangle mesh. Edges are sorted by `(min, max)` vertex index.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Topology {
     /// Undirected edges `[a, b]` with `a < b`. Triangle sides whose two ends are the same vertex
     /// (a degenerate triangle) are not edges.
