@@ -88,41 +88,35 @@ impl Topology {
             });
         }
 
-        // Merge the kept edges with the regrouped ones (both sorted by key); `index` maps an old
-        // edge to its new index (u32::MAX for a regrouped or vanished one).
+        // Merge the kept edges with the regrouped ones (both sorted by key), copying the runs of
+        // kept edges between regrouped keys at once; `index` maps an old edge to its new index
+        // (u32::MAX for a regrouped or vanished one).
         let old_edge_count = self.edges.len();
-        let mut index = vec![0u32; old_edge_count];
-        for key in &keys {
-            if let Ok(e) = self.edges.binary_search(key) {
-                index[e] = u32::MAX;
-            }
-        }
         let capacity = old_edge_count + groups.len();
+        let mut index = vec![u32::MAX; old_edge_count];
         let mut edges = Vec::with_capacity(capacity);
         let mut edge_faces = Vec::with_capacity(capacity);
         let mut edge_face_count = Vec::with_capacity(capacity);
         let mut group_index = Vec::with_capacity(groups.len());
         let mut inconsistent = Vec::new();
-        let mut old_inconsistent = self.inconsistent_edges.iter().peekable();
-        let (mut e, mut k) = (0, 0);
-        while e < old_edge_count || k < groups.len() {
-            if e < old_edge_count && index[e] == u32::MAX {
-                e += 1;
-                continue;
+        let mut copied = 0; // old edges before this are placed
+        let mut k = 0; // next group
+        for key in keys.iter().copied().chain(std::iter::once([u32::MAX; 2])) {
+            let (at, found) = match self.edges[copied..].binary_search(&key) {
+                Ok(i) => (copied + i, true),
+                Err(i) => (copied + i, false),
+            };
+            let start = edges.len() as u32;
+            for (slot, new) in index[copied..at].iter_mut().zip(start..) {
+                *slot = new;
             }
-            let new = edges.len() as u32;
-            if k == groups.len() || (e < old_edge_count && self.edges[e] < groups[k].key) {
-                index[e] = new;
-                edges.push(self.edges[e]);
-                edge_faces.push(self.edge_faces[e]);
-                edge_face_count.push(self.edge_face_count[e]);
-                while old_inconsistent.next_if(|&&i| (i as usize) < e).is_some() {}
-                if old_inconsistent.next_if(|&&i| i as usize == e).is_some() {
-                    inconsistent.push(new);
-                }
-                e += 1;
-            } else {
+            edges.extend_from_slice(&self.edges[copied..at]);
+            edge_faces.extend_from_slice(&self.edge_faces[copied..at]);
+            edge_face_count.extend_from_slice(&self.edge_face_count[copied..at]);
+            copied = if found { at + 1 } else { at };
+            if k < groups.len() && groups[k].key == key {
                 let group = &groups[k];
+                let new = edges.len() as u32;
                 group_index.push(new);
                 edges.push(group.key);
                 edge_faces.push(group.faces);
@@ -133,6 +127,8 @@ impl Topology {
                 k += 1;
             }
         }
+        inconsistent.extend(self.inconsistent_edges.iter().map(|&e| index[e as usize]).filter(|&e| e != u32::MAX));
+        inconsistent.sort_unstable();
         edges.shrink_to_fit();
         edge_faces.shrink_to_fit();
         edge_face_count.shrink_to_fit();
