@@ -127,6 +127,15 @@ pub struct Body {
     last: BodyStats,
 }
 
+/// Prints how long a phase of the fracture took when SOFTSHELL_TRACE_FRACTURE is set (a
+/// measuring aid for the benchmarks; off by default).
+fn trace_phase(what: &str, started: Instant) {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    if *ON.get_or_init(|| std::env::var_os("SOFTSHELL_TRACE_FRACTURE").is_some()) {
+        eprintln!("fracture phase: {what}: {:.3} ms", started.elapsed().as_secs_f64() * 1e3);
+    }
+}
+
 fn triangle_area(x: &[Vec3], t: [u32; 3]) -> f64 {
     let p = t.map(|i| x[i as usize].as_dvec3());
     0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length()
@@ -491,12 +500,16 @@ impl Body {
         }
         let generation = self.generation;
         let drift = after.total() - self.energy_start - self.external_work;
+        let fracture_started = Instant::now();
         let (broken, cores) = self.fracture_phase();
         if self.generation != generation {
             // The energy reference moves with the springs that went away, so the drift goes on
             // from where it was.
+            let t = Instant::now();
             after = self.energy_parts();
             self.energy_start = after.total() - self.external_work - drift;
+            trace_phase("energy after", t);
+            trace_phase("WHOLE fracture phase", fracture_started);
         }
         let mut stats = self.stats(broken, cores, started.elapsed().as_secs_f64(), iterations, after);
         self.energy_now = Some(after);
@@ -592,6 +605,7 @@ impl Body {
         if !self.settings.fracture_enabled() {
             return (0, 0);
         }
+        let t = Instant::now();
         let mut pairs = Vec::new();
         if self.settings.break_strain > 0.0 {
             let limit = self.settings.break_strain;
@@ -617,17 +631,23 @@ impl Body {
             return (0, 0);
         }
         let broken = pairs.len() as u64;
+        trace_phase("detect", t);
         let released = self.change_topology(&pairs, &cores.iter().map(|c| c.1).collect::<Vec<_>>());
         (broken, released)
     }
 
     /// Breaks the springs `pairs` (vertex pairs of current springs) and releases the core blocks
     /// of `cores`, then rebuilds springs, fragments and gas. The one place where topology changes.
+    /// The kept topology is brought up to date after each kind of change (only around the faces
+    /// that changed), never built again from scratch.
     fn change_topology(&mut self, pairs: &[[u32; 2]], cores: &[u32]) -> u64 {
         let n = self.nodes.len();
+        let t = Instant::now();
         let fracture = self.fracture.get_or_insert_with(|| Fracture::new(n, self.triangles.len()));
-        let old_face_fragment = self.face_fragment.clone();
+        let old_face_fragment = std::mem::take(&mut self.face_fragment);
         let mut topology = self.topology.take().unwrap_or_else(|| Topology::build(&self.triangles, n));
+        trace_phase("start", t);
+        let t = Instant::now();
         if !pairs.is_empty() {
             let edges: Vec<u32> = pairs
                 .iter()
@@ -640,32 +660,48 @@ impl Body {
             let mut vertices: Vec<u32> = pairs.iter().flatten().copied().collect();
             vertices.sort_unstable();
             vertices.dedup();
-            crack::split_fans(fracture, &topology, &mut self.triangles, &mut self.nodes, &vertices);
+            let before = self.triangles.clone();
+            if crack::split_fans(fracture, &topology, &mut self.triangles, &mut self.nodes, &vertices) > 0 {
+                topology.update(&before, &self.triangles, self.nodes.len());
+            }
         }
+        trace_phase("cracks", t);
+        let t = Instant::now();
         let mut released = 0;
         if !cores.is_empty() {
-            if !pairs.is_empty() {
-                topology = Topology::build(&self.triangles, self.nodes.len());
-            }
+            let before = self.triangles.clone();
             let mut touched = vec![false; self.nodes.len()];
             for &v in cores {
                 if core_block::release(fracture, &topology, &mut self.triangles, &mut self.nodes, &mut touched, v) {
                     released += 1;
                 }
             }
+            if released > 0 {
+                topology.update(&before, &self.triangles, self.nodes.len());
+            }
         }
-        self.rebuild(&old_face_fragment);
+        trace_phase("cores", t);
+        debug_assert!(
+            topology == Topology::build(&self.triangles, self.nodes.len()),
+            "the updated topology differs from a new build"
+        );
+        self.rebuild(topology, &old_face_fragment);
+        let t = Instant::now();
         if let (Scratch::Implicit(s), Some(fracture)) = (&mut self.scratch, self.fracture.as_ref()) {
             s.extend_warm_start(&fracture.origin);
         }
+        trace_phase("warm start", t);
         released
     }
 
-    /// Rebuilds springs, fragments and gas after a topology change; bumps the generation.
-    fn rebuild(&mut self, old_face_fragment: &[u32]) {
+    /// Rebuilds springs, fragments and gas after a topology change (`topology` is that of the
+    /// current triangles); bumps the generation.
+    fn rebuild(&mut self, topology: Topology, old_face_fragment: &[u32]) {
         let n = self.nodes.len();
-        let topology = Topology::build(&self.triangles, n);
+        let t = Instant::now();
         self.springs = build_springs(&topology, self.fracture.as_ref(), &self.nodes.rest);
+        trace_phase("rebuild: springs", t);
+        let t = Instant::now();
         self.face_fragment = topology.face_components.clone();
         self.fragment_count = topology.component_count;
         if let Some(old) = self.gas.take() {
@@ -674,6 +710,7 @@ impl Body {
             gas.inherit(&old.n_rt, &old.volume, old_face_fragment, &self.face_fragment, &self.nodes.x, &self.triangles);
             self.gas = Some(gas);
         }
+        trace_phase("rebuild: gas", t);
         self.topology = Some(topology);
         self.generation += 1;
     }

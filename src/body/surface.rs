@@ -84,7 +84,9 @@ pub(crate) fn side_of(topology: &Topology, face: u32, edge: u32) -> Option<usize
     topology.face_edges[face as usize].iter().position(|&e| e == edge)
 }
 
-/// True when edge `edge` carries no spring (one of its faces marks it broken).
+/// True when edge `edge` carries no spring: one of its first two faces marks it broken (on the
+/// first side of that face that is the edge).
+#[cfg(test)]
 pub(crate) fn edge_is_broken(topology: &Topology, fracture: Option<&Fracture>, edge: u32) -> bool {
     let Some(fracture) = fracture else { return false };
     topology.edge_faces[edge as usize]
@@ -93,11 +95,38 @@ pub(crate) fn edge_is_broken(topology: &Topology, fracture: Option<&Fracture>, e
         .any(|&f| side_of(topology, f, edge).is_some_and(|side| fracture.is_broken(f, side)))
 }
 
+/// The edges that carry no spring, sorted: those [`edge_is_broken`] finds, gathered from the
+/// few faces with a broken side instead of asking every edge.
+fn broken_edges(topology: &Topology, fracture: Option<&Fracture>) -> Vec<u32> {
+    let Some(fracture) = fracture else { return Vec::new() };
+    let mut broken = Vec::new();
+    for (f, &bits) in fracture.broken.iter().enumerate().filter(|(_, b)| **b != 0) {
+        for side in (0..3).filter(|&side| bits & (1 << side) != 0) {
+            let e = topology.face_edges[f][side];
+            // Only as edge_is_broken counts it: from one of the edge's first two faces, on the
+            // face's first side along the edge.
+            if e != u32::MAX
+                && topology.edge_faces[e as usize].contains(&(f as u32))
+                && side_of(topology, f as u32, e) == Some(side)
+            {
+                broken.push(e);
+            }
+        }
+    }
+    broken.sort_unstable();
+    broken.dedup();
+    broken
+}
+
 /// One spring per unbroken edge, with rest length `|X_a - X_b|` from the rest positions.
 pub(crate) fn build_springs(topology: &Topology, fracture: Option<&Fracture>, rest: &[Vec3]) -> Springs {
-    let mut springs = Springs::default();
+    let broken = broken_edges(topology, fracture);
+    let count = topology.edges.len() - broken.len();
+    let mut springs =
+        Springs { ends: Vec::with_capacity(count), rest: Vec::with_capacity(count), ..Default::default() };
+    let mut next_broken = broken.iter().peekable();
     for (e, &[a, b]) in topology.edges.iter().enumerate() {
-        if edge_is_broken(topology, fracture, e as u32) {
+        if next_broken.next_if_eq(&&(e as u32)).is_some() {
             continue;
         }
         springs.ends.push([a, b]);
@@ -105,4 +134,46 @@ pub(crate) fn build_springs(topology: &Topology, fracture: Option<&Fracture>, re
     }
     springs.build_adjacency(rest.len());
     springs
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn springs_skip_exactly_the_broken_edges() {
+        // A torus grid with a few duplicated faces (non-manifold edges, where only the first two
+        // faces count) and a degenerate one (an edge twice in one face).
+        let (nu, nv) = (6u32, 5u32);
+        let id = |i: u32, j: u32| (i % nu) * nv + j % nv;
+        let mut triangles = Vec::new();
+        for i in 0..nu {
+            for j in 0..nv {
+                triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        triangles.extend([triangles[3], triangles[7], triangles[7], [0, 1, 0]]);
+        let rest: Vec<Vec3> = (0..nu * nv).map(|k| Vec3::new(k as f32, (k * k % 7) as f32, 0.5 * k as f32)).collect();
+        let topology = Topology::build(&triangles, rest.len());
+        let mut state = 99u32;
+        for round in 0..50 {
+            let mut fracture = Fracture::new(rest.len(), triangles.len());
+            for bits in &mut fracture.broken {
+                state = state.wrapping_mul(1_103_515_245).wrapping_add(12345);
+                *bits = if (state >> 16) % 4 == 0 { ((state >> 20) % 8) as u8 } else { 0 };
+            }
+            let springs = build_springs(&topology, Some(&fracture), &rest);
+            let expected: Vec<[u32; 2]> = (0..topology.edges.len() as u32)
+                .filter(|&e| !edge_is_broken(&topology, Some(&fracture), e))
+                .map(|e| topology.edges[e as usize])
+                .collect();
+            assert_eq!(springs.ends, expected, "round {round}");
+            assert!(springs.ends.len() < topology.edges.len(), "round {round}: some springs must break");
+            for (&[a, b], &l) in springs.ends.iter().zip(&springs.rest) {
+                assert_eq!(l, (rest[b as usize] - rest[a as usize]).length());
+            }
+        }
+        assert_eq!(build_springs(&topology, None, &rest).ends, topology.edges);
+    }
 }
