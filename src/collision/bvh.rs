@@ -152,14 +152,51 @@ impl Node {
 /// holds lanes `4 * half ..` of that axis), padded with empty boxes: a box is tested against the
 /// whole leaf with a few SIMD compares and one bit mask, so the leaf loops branch on the
 /// overlaps only (mostly 1 in 6 on the kitten's edges), not on every test.
+/// The keys likewise (`keys[slot][half]`), as the f32 with the key's bits, so that the pairs
+/// sharing a key come out of one more mask instead of a branch per overlap (3 in 4 of the
+/// kitten's edge overlaps are neighbours).
 #[derive(Clone, Copy, Debug)]
 struct LeafLanes {
     lo: [[Vec4; 2]; 3],
     hi: [[Vec4; 2]; 3],
+    keys: [[Vec4; 2]; 3],
+}
+
+/// A key as the f32 compared in [`LeafLanes::sharing`]: the same bits, so two keys compare
+/// equal exactly when they are equal, except where the f32 compare differs from the bits': 0
+/// and 2^31 (+0.0 and -0.0), and the NaN patterns (never equal). Keys from 2^31 up therefore
+/// become a NaN, which shares with nothing: a pair is then reported rather than skipped, which
+/// the callers allow (they check what they need), while a skip is never wrong.
+fn key_lane(key: u32) -> f32 {
+    if key < 1 << 31 { f32::from_bits(key) } else { f32::NAN }
 }
 
 impl LeafLanes {
-    const EMPTY: LeafLanes = LeafLanes { lo: [[Vec4::INFINITY; 2]; 3], hi: [[Vec4::NEG_INFINITY; 2]; 3] };
+    const EMPTY: LeafLanes =
+        LeafLanes { lo: [[Vec4::INFINITY; 2]; 3], hi: [[Vec4::NEG_INFINITY; 2]; 3], keys: [[Vec4::NAN; 2]; 3] };
+
+    fn set_keys(&mut self, lane: usize, keys: &[u32; 3]) {
+        let (half, j) = (lane / 4, lane % 4);
+        for (slot, &key) in keys.iter().enumerate() {
+            self.keys[slot][half][j] = key_lane(key);
+        }
+    }
+
+    /// Bit `j` set when lane `j` shares one of `keys` (each from [`key_lane`]).
+    #[inline(always)]
+    fn sharing(&self, keys: &[f32; 3]) -> u32 {
+        let mut mask = 0;
+        for half in 0..2 {
+            let mut any = BVec4A::splat(false);
+            for lane_keys in &self.keys {
+                for &key in keys {
+                    any |= lane_keys[half].cmpeq(Vec4::splat(key));
+                }
+            }
+            mask |= any.bitmask() << (4 * half);
+        }
+        mask
+    }
 
     fn set(&mut self, lane: usize, b: &Box32) {
         let (half, j) = (lane / 4, lane % 4);
@@ -234,8 +271,9 @@ impl Bvh {
 
     /// Builds the tree over `boxes` with a key triple per primitive (repeat a key to give fewer,
     /// e.g. a mesh edge's two vertices as `[a, b, a]`): the traversals then never report two
-    /// primitives that share a key (mesh neighbours sharing a vertex), without testing their
-    /// exact boxes or calling back. `keys` empty: no skipping.
+    /// primitives that share a key below 2^31 (mesh neighbours sharing a vertex), without testing
+    /// their exact boxes or calling back (a shared key from 2^31 up may be reported, see
+    /// [`key_lane`]). `keys` empty: no skipping.
     pub fn build_with_keys(boxes: Vec<Aabb>, keys: Vec<[u32; 3]>) -> Bvh {
         assert!(keys.is_empty() || keys.len() == boxes.len(), "one key triple per primitive");
         let mut bvh = Bvh {
@@ -347,6 +385,9 @@ impl Bvh {
             for (lane, b) in self.leaf_boxes32[node.a as usize..node.b as usize].iter().enumerate() {
                 lanes.set(lane, b);
             }
+            for (lane, keys) in self.leaf_keys.get(node.a as usize..node.b as usize).unwrap_or(&[]).iter().enumerate() {
+                lanes.set_keys(lane, keys);
+            }
         }
     }
 
@@ -414,14 +455,14 @@ impl Bvh {
         }
     }
 
-    /// Whether leaf slots `k` of `self` and `l` of `other` share a key (never without keys).
+    /// The lanes of `other`'s leaf `lanes` that share a key with slot `k` of `self` (none
+    /// without keys).
     #[inline(always)]
-    fn share_key(&self, k: usize, other: &Bvh, l: usize) -> bool {
+    fn sharing(&self, k: usize, other: &Bvh, lanes: &LeafLanes) -> u32 {
         if self.leaf_keys.is_empty() || other.leaf_keys.is_empty() {
-            return false;
+            return 0;
         }
-        let (a, b) = (&self.leaf_keys[k], &other.leaf_keys[l]);
-        a.iter().any(|x| b.contains(x))
+        lanes.sharing(&self.leaf_keys[k].map(key_lane))
     }
 
     /// Calls `f(j)` for every primitive `j` whose box overlaps `query`, in a fixed order.
@@ -468,11 +509,11 @@ impl Bvh {
                 (true, true) => {
                     let lanes = &other.leaf_lanes[ny.lanes as usize];
                     for k in nx.a as usize..nx.b as usize {
-                        let mut mask = lanes.overlaps(&self.leaf_boxes32[k]);
+                        let mut mask = lanes.overlaps(&self.leaf_boxes32[k]) & !self.sharing(k, other, lanes);
                         while mask != 0 {
                             let l = ny.a as usize + mask.trailing_zeros() as usize;
                             mask &= mask - 1;
-                            if !self.share_key(k, other, l) && self.leaf_boxes[k].overlaps(&other.leaf_boxes[l]) {
+                            if self.leaf_boxes[k].overlaps(&other.leaf_boxes[l]) {
                                 f(self.order[k], other.order[l]);
                             }
                         }
@@ -507,11 +548,13 @@ impl Bvh {
                     let lanes = &self.leaf_lanes[nx.lanes as usize];
                     for k in nx.a as usize..nx.b as usize {
                         // Only the lanes after k's own.
-                        let mut mask = lanes.overlaps(&self.leaf_boxes32[k]) & (!0u32 << (k - nx.a as usize + 1));
+                        let mut mask = lanes.overlaps(&self.leaf_boxes32[k])
+                            & !self.sharing(k, self, lanes)
+                            & (!0u32 << (k - nx.a as usize + 1));
                         while mask != 0 {
                             let l = nx.a as usize + mask.trailing_zeros() as usize;
                             mask &= mask - 1;
-                            if !self.share_key(k, self, l) && self.leaf_boxes[k].overlaps(&self.leaf_boxes[l]) {
+                            if self.leaf_boxes[k].overlaps(&self.leaf_boxes[l]) {
                                 let (i, j) = (self.order[k], self.order[l]);
                                 f(i.min(j), i.max(j));
                             }
@@ -530,11 +573,11 @@ impl Bvh {
                 (true, true) => {
                     let lanes = &self.leaf_lanes[ny.lanes as usize];
                     for k in nx.a as usize..nx.b as usize {
-                        let mut mask = lanes.overlaps(&self.leaf_boxes32[k]);
+                        let mut mask = lanes.overlaps(&self.leaf_boxes32[k]) & !self.sharing(k, self, lanes);
                         while mask != 0 {
                             let l = ny.a as usize + mask.trailing_zeros() as usize;
                             mask &= mask - 1;
-                            if !self.share_key(k, self, l) && self.leaf_boxes[k].overlaps(&self.leaf_boxes[l]) {
+                            if self.leaf_boxes[k].overlaps(&self.leaf_boxes[l]) {
                                 let (i, j) = (self.order[k], self.order[l]);
                                 f(i.min(j), i.max(j));
                             }
@@ -639,6 +682,15 @@ mod tests {
         keyed.for_each_overlap(&Bvh::build_with_keys(boxes, keys), |i, j| across.push((i, j)));
         assert!(across.iter().all(|&(i, j)| i != j && i != j + 1 && j != i + 1));
         assert_eq!(across.len(), 2 * expected.len());
+        // Keys 0 and 2^31 (+0.0 and -0.0 as f32) are different keys: not skipped. Equal keys
+        // from 2^31 up may be reported (never a wrong skip).
+        let two = vec![Aabb::around(&[[0.0; 3]], 1.0), Aabb::around(&[[0.5, 0.0, 0.0]], 1.0)];
+        for (keys, reported) in [([[0; 3], [1 << 31; 3]], true), ([[7; 3], [7; 3]], false), ([[u32::MAX; 3]; 2], true)]
+        {
+            let mut pairs = Vec::new();
+            Bvh::build_with_keys(two.clone(), keys.to_vec()).for_each_self_overlap(|i, j| pairs.push((i, j)));
+            assert_eq!(pairs == [(0, 1)], reported, "keys {keys:?}");
+        }
     }
 
     #[test]

@@ -373,7 +373,8 @@ impl SelfContact {
             v.capacity() * std::mem::size_of::<T>()
         }
         // Per primitive: its box, the box again in leaf order, its index in the order and back.
-        let tree = |n: usize| n * (2 * std::mem::size_of::<Aabb>() + 8) + n.div_ceil(2) * 64;
+        // Leaves hold 4 to 8 primitives, with 288 bytes of lanes each.
+        let tree = |n: usize| n * (2 * std::mem::size_of::<Aabb>() + 8) + n.div_ceil(2) * 64 + n.div_ceil(4) * 288;
         std::mem::size_of::<Self>()
             + b(&self.edges)
             + b(&self.triangles)
