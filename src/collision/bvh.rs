@@ -162,6 +162,9 @@ struct LeafLanes {
     keys: [[Vec4; 2]; 3],
 }
 
+/// Bytes of one leaf's lanes (for memory estimates).
+pub(crate) const LEAF_LANES_BYTES: usize = std::mem::size_of::<LeafLanes>();
+
 /// A key as the f32 compared in [`LeafLanes::sharing`]: the same bits, so two keys compare
 /// equal exactly when they are equal, except where the f32 compare differs from the bits': 0
 /// and 2^31 (+0.0 and -0.0), and the NaN patterns (never equal). Keys from 2^31 up therefore

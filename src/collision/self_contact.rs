@@ -22,7 +22,7 @@
 
 use glam::{DVec3, Vec3, Vec3A};
 
-use super::bvh::{Aabb, Bvh};
+use super::bvh::{Aabb, Bvh, LEAF_LANES_BYTES};
 use super::ccd::{CcdSettings, Stage, edge_edge_with, vertex_triangle_with};
 use super::filters::V3;
 use super::hull_filter::{
@@ -373,8 +373,10 @@ impl SelfContact {
             v.capacity() * std::mem::size_of::<T>()
         }
         // Per primitive: its box, the box again in leaf order, its index in the order and back.
-        // Leaves hold 4 to 8 primitives, with 288 bytes of lanes each.
-        let tree = |n: usize| n * (2 * std::mem::size_of::<Aabb>() + 8) + n.div_ceil(2) * 64 + n.div_ceil(4) * 288;
+        // Leaves hold 4 to 8 primitives, each with its lanes.
+        let tree = |n: usize| {
+            n * (2 * std::mem::size_of::<Aabb>() + 8) + n.div_ceil(2) * 64 + n.div_ceil(4) * LEAF_LANES_BYTES
+        };
         std::mem::size_of::<Self>()
             + b(&self.edges)
             + b(&self.triangles)
