@@ -335,6 +335,7 @@ impl Bvh {
                 self.parent[node.b as usize] = n as u32;
             }
         }
+        self.sort_leaf_keys();
         self.sort_leaf_boxes();
         self.built_looseness = self.looseness();
     }
@@ -373,10 +374,10 @@ impl Bvh {
         index
     }
 
-    fn sort_leaf_boxes(&mut self) {
-        for (k, (b, &i)) in self.leaf_boxes.iter_mut().zip(&self.order).enumerate() {
-            *b = self.boxes[i as usize];
-            self.leaf_boxes32[k] = Box32::around(b);
+    /// What depends on the order only (after a build): the slots, the keys in leaf order and
+    /// in the lanes, the empty lanes.
+    fn sort_leaf_keys(&mut self) {
+        for (k, &i) in self.order.iter().enumerate() {
             self.slot[i as usize] = k as u32;
             if !self.keys.is_empty() {
                 self.leaf_keys[k] = self.keys[i as usize];
@@ -385,11 +386,23 @@ impl Bvh {
         for node in self.nodes.iter().filter(|n| n.is_leaf()) {
             let lanes = &mut self.leaf_lanes[node.lanes as usize];
             *lanes = LeafLanes::EMPTY;
-            for (lane, b) in self.leaf_boxes32[node.a as usize..node.b as usize].iter().enumerate() {
-                lanes.set(lane, b);
-            }
             for (lane, keys) in self.leaf_keys.get(node.a as usize..node.b as usize).unwrap_or(&[]).iter().enumerate() {
                 lanes.set_keys(lane, keys);
+            }
+        }
+    }
+
+    /// The boxes in leaf order, in f32 and in the lanes (after every change of the boxes; the
+    /// lanes past a leaf's primitives stay empty).
+    fn sort_leaf_boxes(&mut self) {
+        for (k, (b, &i)) in self.leaf_boxes.iter_mut().zip(&self.order).enumerate() {
+            *b = self.boxes[i as usize];
+            self.leaf_boxes32[k] = Box32::around(b);
+        }
+        for node in self.nodes.iter().filter(|n| n.is_leaf()) {
+            let lanes = &mut self.leaf_lanes[node.lanes as usize];
+            for (lane, b) in self.leaf_boxes32[node.a as usize..node.b as usize].iter().enumerate() {
+                lanes.set(lane, b);
             }
         }
     }
