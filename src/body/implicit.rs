@@ -540,11 +540,13 @@ fn product(
 /// `Σ g·value(i)` per gas fragment into `out` (no gas: nothing).
 fn gas_dots(sys: &System, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
     out.fill(0.0);
+    let mut run = GasRun::default();
     for (i, g) in sys.gradient.iter().enumerate() {
         if let Some(frag) = sys.fragment(i) {
-            out[frag] += Vec3A::from(*g).dot(value(i)) as f64;
+            run.add(out, frag, Vec3A::from(*g).dot(value(i)) as f64);
         }
     }
+    run.flush(out);
 }
 
 /// A chunk of the residual update.
@@ -674,6 +676,10 @@ fn update_direction(
         .collect();
     pool.for_each_task(&mut tasks, |t| {
         t.gas.fill(0.0);
+        // `Σ g·p` of the current run of vertices of one fragment, in a register: added into
+        // `t.gas` through memory at every vertex it made a chain of loads and stores that set
+        // the pace of this pass.
+        let mut run = GasRun::default();
         for k in 0..t.p.len() {
             let i = t.first + k;
             let mut zi = z[i];
@@ -687,10 +693,43 @@ fn update_direction(
             let value = zi + t.p[k] * beta;
             t.p[k] = value;
             if let Some(frag) = sys.fragment(i) {
-                t.gas[frag] += Vec3A::from(sys.gradient[i]).dot(value) as f64;
+                run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(value) as f64);
             }
         }
+        run.flush(t.gas);
     });
+}
+
+/// A running sum per fragment over consecutive vertices, added into the per-fragment sums when
+/// the fragment changes (the sums then depend only on the vertex order, not the thread count).
+struct GasRun {
+    fragment: usize,
+    sum: f64,
+}
+
+impl Default for GasRun {
+    fn default() -> Self {
+        Self { fragment: usize::MAX, sum: 0.0 }
+    }
+}
+
+impl GasRun {
+    #[inline(always)]
+    fn add(&mut self, sums: &mut [f64], fragment: usize, value: f64) {
+        if fragment != self.fragment {
+            self.flush(sums);
+            self.fragment = fragment;
+        }
+        self.sum += value;
+    }
+
+    #[inline(always)]
+    fn flush(&mut self, sums: &mut [f64]) {
+        if self.fragment != usize::MAX {
+            sums[self.fragment] += self.sum;
+        }
+        self.sum = 0.0;
+    }
 }
 
 /// `Σ g·p` per fragment from the chunks' parts (in chunk order).
