@@ -469,10 +469,7 @@ impl Gas {
             + self.pressure.capacity()
             + self.open_area.capacity())
             * 8
-            + (self.vertex_fragment.capacity()
-                + self.reference_vertex.capacity()
-                + self.corner_offsets.capacity())
-                * 4
+            + (self.vertex_fragment.capacity() + self.reference_vertex.capacity() + self.corner_offsets.capacity()) * 4
             + self.corners.capacity() * std::mem::size_of::<Corner>()
             + self.chunk_six_v.capacity() * 8
             + self.caps.iter().map(|c| c.ring.capacity() * 4 + std::mem::size_of::<Cap>()).sum::<usize>()

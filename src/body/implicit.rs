@@ -82,7 +82,8 @@ impl ContactFilter {
 /// Scratch of the implicit integrator (allocated only when it is used).
 #[derive(Default)]
 pub(crate) struct ImplicitScratch {
-    /// External and gas forces at the start of the substep (the springs are added per vertex).
+    /// External and gas forces at the start of the substep (the springs are added per vertex);
+    /// only with wind: otherwise the assembly computes gravity and pressure per vertex.
     pub force: Vec<Vec3>,
     pub gradient: Vec<Vec3>,
     /// Per entry of `Springs::adjacency`: the coupling block of that (vertex, spring) pair, and
@@ -228,7 +229,9 @@ struct AssemblyTask<'a> {
     /// obstacles).
     dv: &'a mut [Vec3A],
     contact: &'a mut [ContactFilter],
-    /// Over the chunk: `Σ magnitude²`, `Σ |rhs|²` and whether a contact holds.
+    /// Over the chunk: `Σ g·Δv` per gas fragment (the start of the solve), `Σ magnitude²`,
+    /// `Σ |rhs|²` and whether a contact holds.
+    gas: &'a mut [f64],
     magnitude_squared: f64,
     rhs_squared: f64,
     any_contact: bool,
@@ -286,11 +289,14 @@ fn start_vertex(
 /// for the force scale. The second end takes the vectors negated (`u` and the velocity
 /// difference both flip sign, so they are exactly the negated values) and the same block, so
 /// each spring is computed once, not once per end.
+///
+/// 48 bytes (the force unaligned beside the stretch): the assembly gathers these per vertex in
+/// an order that jumps about the array, so their size is what that gather waits on.
 #[derive(Clone, Copy, Default)]
 struct SpringTerms {
-    force: Vec3A,
     kv: Vec3A,
     coupling: Coupling,
+    force: Vec3,
     stretch: f32,
 }
 
@@ -316,7 +322,7 @@ fn spring_terms(sys: &System, k: usize) -> SpringTerms {
     let (a, b) = spring_block_coefficients(len, rest, ks);
     let (alpha, beta) = (h2 * a, h2 * b + h * kd);
     SpringTerms {
-        force: u * (stretch + kd * along),
+        force: (u * (stretch + kd * along)).into(),
         kv: (dvel * a + u * (b * along)) * h2,
         coupling: Coupling::new(u, alpha, beta),
         stretch: stretch.abs(),
@@ -345,8 +351,9 @@ fn assemble_vertex(
     for ((slot, other), &(spring, j)) in coupling.iter_mut().zip(neighbor.iter_mut()).zip(model.springs.around(i)) {
         *other = j;
         let t = &terms[spring as usize];
-        let sign = if model.springs.ends[spring as usize][0] == i as u32 { 1.0 } else { -1.0 };
-        f += t.force * sign;
+        // `Springs::ends` holds each spring as [lower, higher] vertex.
+        let sign = if (i as u32) < j { 1.0 } else { -1.0 };
+        f += Vec3A::from(t.force) * sign;
         kv += t.kv * sign;
         *slot = t.coupling;
         let w = t.coupling.w();
@@ -759,7 +766,6 @@ pub(crate) fn substep(
     s: &mut ImplicitScratch,
 ) -> (f64, usize) {
     let n = x.len();
-    s.force.resize(n, Vec3::ZERO);
     for buffer in [&mut s.rhs, &mut s.dv, &mut s.r, &mut s.z, &mut s.p, &mut s.ap] {
         buffer.resize(n, Vec3A::ZERO);
     }
@@ -767,12 +773,25 @@ pub(crate) fn substep(
     s.inv_diag.resize(n, Mat3A::ZERO);
     s.coupling.resize(model.springs.adjacency.len(), Coupling::default());
     s.neighbor.resize(model.springs.adjacency.len(), 0);
-    let power = external_forces(model, x, v, &mut s.force);
+    // Without wind the assembly adds gravity and the pressure per vertex (two serial passes
+    // fewer); with wind the external forces are gathered here first.
+    let wind = model.has_wind();
+    let power = if wind {
+        s.force.resize(n, Vec3::ZERO);
+        external_forces(model, x, v, &mut s.force)
+    } else {
+        s.force = Vec::new();
+        0.0
+    };
     let h2 = h * h;
     let mut gas_dot_v = std::mem::take(&mut s.gas_dot_v);
     if let Some(gas) = gas.as_deref_mut() {
         s.gradient.resize(n, Vec3::ZERO);
-        add_gas_forces_parallel(model, pool, gas, x, &mut s.gradient, &mut s.force);
+        if wind {
+            add_gas_forces_parallel(model, pool, gas, x, &mut s.gradient, &mut s.force);
+        } else {
+            gas.measure_with_gradient_parallel(pool, x, model.triangles, model.face_fragment, &mut s.gradient);
+        }
         let frags = gas.fragment_count();
         s.gas_coef.clear();
         s.gas_coef.extend((0..frags).map(|f| {
@@ -823,7 +842,12 @@ pub(crate) fn substep(
     // axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can), then the
     // start of the solve (warm start, contacts).
     let any_contact;
+    let mut gas_dot = std::mem::take(&mut s.gas_dot);
+    let mut gas_partial = std::mem::take(&mut s.gas_partial);
+    let fragments = gas_dot.len();
+    gas_partial.resize(n.div_ceil(CHUNK) * fragments, 0.0);
     {
+        let mut gas_chunks = gas_partial.chunks_mut(fragments.max(1));
         let mut tasks = Vec::with_capacity(n.div_ceil(CHUNK));
         let mut coupling = &mut s.coupling[..];
         let mut neighbor = &mut s.neighbor[..];
@@ -854,6 +878,7 @@ pub(crate) fn substep(
                 magnitude,
                 dv,
                 contact: contact_head,
+                gas: if fragments > 0 { gas_chunks.next().unwrap() } else { &mut [] },
                 magnitude_squared: 0.0,
                 rhs_squared: 0.0,
                 any_contact: false,
@@ -865,14 +890,24 @@ pub(crate) fn substep(
         let previous_dv = &s.previous_dv;
         pool.for_each_task(&mut tasks, |t| {
             let mut cursor = 0;
+            t.gas.fill(0.0);
+            let mut run = GasRun::default();
             for k in 0..t.rhs.len() {
                 let i = t.first + k;
                 let count = model.springs.around(i).len();
+                // The same operations as `external_forces` and `add_gas_forces_parallel`.
+                let f = force.get(i).copied().unwrap_or_else(|| {
+                    let mut f = model.settings.gravity * model.mass[i];
+                    if let Some(frag) = sys.fragment(i) {
+                        f += sys.gradient[i] * sys.gas_pressure[frag] as f32;
+                    }
+                    f
+                });
                 let (rhs, mut inv_diag, magnitude) = assemble_vertex(
                     &sys,
                     terms,
                     i,
-                    force[i],
+                    f,
                     gas_dot_v,
                     &mut t.coupling[cursor..cursor + count],
                     &mut t.neighbor[cursor..cursor + count],
@@ -883,6 +918,9 @@ pub(crate) fn substep(
                 t.inv_diag[k] = inv_diag;
                 t.magnitude[k] = magnitude;
                 t.dv[k] = dv;
+                if let Some(frag) = sys.fragment(i) {
+                    run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(dv) as f64);
+                }
                 if let Some(slot) = t.contact.get_mut(k) {
                     *slot = filter;
                     t.any_contact |= filter != ContactFilter::Free;
@@ -890,6 +928,7 @@ pub(crate) fn substep(
                 t.magnitude_squared += (magnitude as f64) * (magnitude as f64);
                 t.rhs_squared += rhs.length_squared() as f64;
             }
+            run.flush(t.gas);
         });
         (magnitude_squared, rhs_squared) =
             tasks.iter().fold((0.0, 0.0), |(m, r), t| (m + t.magnitude_squared, r + t.rhs_squared));
@@ -901,11 +940,7 @@ pub(crate) fn substep(
     }
 
     // Preconditioned conjugate gradients (modified PCG: every vector filtered by the contacts).
-    let mut gas_dot = std::mem::take(&mut s.gas_dot);
-    let mut gas_partial = std::mem::take(&mut s.gas_partial);
-    if gas.is_some() {
-        gas_dots(&sys, |i| s.dv[i], &mut gas_dot);
-    }
+    sum_gas_partial(&gas_partial, &mut gas_dot);
     product(pool, &sys, &s.contact, (&s.coupling, &s.neighbor), &s.dv, &gas_dot, &mut s.ap);
     let mut rz = initial_residual(pool, (&mut s.r, &mut s.z), &s.rhs, &s.ap, &s.inv_diag, &s.contact, any_contact);
     // The coarse level: made once (again only if the substep length changes; after a topology
@@ -918,8 +953,6 @@ pub(crate) fn substep(
     if let Some(c) = coarse.as_mut() {
         rz += c.solve(pool, &s.r);
     }
-    let fragments = gas_dot.len();
-    gas_partial.resize(n.div_ceil(CHUNK) * fragments, 0.0);
     s.p.fill(Vec3A::ZERO);
     update_direction(pool, &sys, &mut s.p, &s.z, coarse.as_ref(), &s.contact, 0.0, &mut gas_partial, fragments);
     sum_gas_partial(&gas_partial, &mut gas_dot);
