@@ -44,6 +44,14 @@ fn sum_rest_squared(positions: &[f32], triangles: &[u32]) -> f64 {
 
 struct Run {
     ms_per_step: f64,
+    /// The 10th percentile and the median of the step times, ms (steadier than the mean on a
+    /// shared machine: other processes only ever add time).
+    p10: f64,
+    median: f64,
+    /// On-CPU time of all the process's threads per step, ms (from /proc/self/task/*/schedstat;
+    /// 0 where that is not available): the work, whatever else the machine runs. With worker
+    /// threads it also counts their spinning while they wait for work.
+    cpu_ms: f64,
     iterations: f64,
     settled: f64,
     low: f64,
@@ -91,6 +99,7 @@ fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usiz
     let mut times = Vec::with_capacity(steps);
     let mut failed = None;
     let mut iterations = 0u64;
+    let cpu_start = cpu_seconds();
     for k in 0..steps {
         let mut stats = SoftshellBodyStats::default();
         let started = Instant::now();
@@ -114,10 +123,17 @@ fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usiz
         }
         volumes.push(stats.volume / v0);
     }
+    let cpu = cpu_seconds() - cpu_start;
     // SAFETY: made above, freed once.
     unsafe { softshell_body_free(body) };
     let tail = &volumes[volumes.len().saturating_sub(100)..];
+    let mut sorted = times.clone();
+    sorted.sort_by(f64::total_cmp);
+    let quantile = |q: f64| sorted.get((q * sorted.len() as f64) as usize).map_or(0.0, |t| t * 1e3);
     Run {
+        p10: quantile(0.1),
+        median: quantile(0.5),
+        cpu_ms: cpu / times.len().max(1) as f64 * 1e3,
         ms_per_step: times.iter().sum::<f64>() / times.len().max(1) as f64 * 1e3,
         iterations: iterations as f64 / times.len().max(1) as f64,
         settled: tail.iter().sum::<f64>() / tail.len().max(1) as f64,
@@ -125,6 +141,16 @@ fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usiz
         high: tail.iter().copied().fold(f64::NEG_INFINITY, f64::max),
         failed,
     }
+}
+
+/// On-CPU seconds of every thread of this process so far (0 without /proc).
+fn cpu_seconds() -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return 0.0 };
+    tasks
+        .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("schedstat")).ok())
+        .filter_map(|s| s.split_whitespace().next()?.parse::<f64>().ok())
+        .sum::<f64>()
+        * 1e-9
 }
 
 /// V0 / (4/3 π): the mesh's own volume in units of the unit ball's.
@@ -199,7 +225,10 @@ fn main() {
         c[1] += 2.5;
     }
     println!("\ndropped on the ground, {steps} steps (V/V0 over the last 100 steps):");
-    println!("{:<34} {:>9} {:>9} {:>9} {:>9} {:>9}", "integrator", "ms/step", "V/V0", "min", "max", "CG it.");
+    println!(
+        "{:<34} {:>9} {:>9} {:>9} {:>9} {:>9}   ms/step: 10th pct., median; CPU ms/step",
+        "integrator", "ms/step", "V/V0", "min", "max", "CG it."
+    );
     let configs: Vec<(&str, u32, u32, u32, f32)> = vec![
         ("implicit Euler (default), 1 thread", SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1, 0, 1.0 / 60.0),
         ("implicit Euler (default)", SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1, 10, 1.0 / 60.0),
@@ -238,8 +267,8 @@ fn main() {
         let r = run(&positions, &triangles, &d, n);
         match r.failed {
             None => println!(
-                "{name:<34} {:>9.2} {:>9.4} {:>9.4} {:>9.4} {:>9.1}",
-                r.ms_per_step, r.settled, r.low, r.high, r.iterations
+                "{name:<34} {:>9.2} {:>9.4} {:>9.4} {:>9.4} {:>9.1}   {:.2}, {:.2}; {:.2}",
+                r.ms_per_step, r.settled, r.low, r.high, r.iterations, r.p10, r.median, r.cpu_ms
             ),
             Some(f) => {
                 println!("{name:<34} {:>9.2} UNSTABLE ({})", r.ms_per_step, f.chars().take(120).collect::<String>())

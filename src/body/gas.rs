@@ -6,7 +6,7 @@
 //! gradient of it: the cap centre's share of the gradient goes to the loop's vertices equally.
 //! Allocated only when the body has gas.
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec3, Vec3A};
 
 use crate::parallel::WorkerPool;
 
@@ -41,9 +41,26 @@ pub(crate) struct Gas {
     /// The triangle corners at each vertex in CSR form (`3 face + corner`, faces ascending), made
     /// on the first parallel measurement: lets it gather per vertex instead of scattering.
     corner_offsets: Vec<u32>,
-    corners: Vec<u32>,
+    corners: Vec<Corner>,
+    /// Per vertex: its corners close a ring around it (every neighbour is once the next and once
+    /// the previous corner), so its gradient does not depend on the origin (see
+    /// [`Gas::measure_with_gradient_parallel`]).
+    closed_fan: Vec<bool>,
     /// Per chunk of vertices and per fragment, that chunk's part of 6 V.
     chunk_six_v: Vec<f64>,
+}
+
+/// A triangle corner seen from its vertex: the next two corners of the triangle (in its winding)
+/// and the triangle's fragment, with a flag on corner 0 (which adds the face's volume term).
+/// Stored per corner so the gathering pass reads 12 bytes instead of looking up the triangle,
+/// its fragment and the corner's place in it (on the issue-5 balloon that lookup, a division and
+/// two remainders per corner, made this pass 12% of an implicit step).
+#[derive(Clone, Copy, Debug, Default)]
+struct Corner {
+    next: u32,
+    prev: u32,
+    /// `fragment << 1 | (corner == 0)`.
+    fragment_first: u32,
 }
 
 /// Vertices per chunk of the parallel measurement (fixed, so the sums do not depend on the
@@ -55,6 +72,10 @@ pub(crate) const SHRED_FRACTION: f64 = 1e-3;
 
 /// Fraction of a fragment's volume at gas assignment below which the pressure is clamped.
 const CLAMP_FRACTION: f64 = 1e-2;
+
+/// 1/6 (each gradient term is a cross product over 6; a multiplication, where three f64
+/// divisions per triangle corner were a third of the gathering pass).
+const SIXTH: f64 = 1.0 / 6.0;
 
 fn tet(o: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
     (a - o).dot((b - o).cross(c - o))
@@ -102,6 +123,7 @@ impl Gas {
             clamped: false,
             corner_offsets: Vec::new(),
             corners: Vec::new(),
+            closed_fan: Vec::new(),
             chunk_six_v: Vec::new(),
         }
     }
@@ -151,9 +173,9 @@ impl Gas {
             six_v[frag as usize] += p[0].dot(across);
             if self.n_rt[frag as usize] > 0.0 {
                 // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
-                out[t[0] as usize] += (across / 6.0).as_vec3();
-                out[t[1] as usize] += (p[2].cross(p[0]) / 6.0).as_vec3();
-                out[t[2] as usize] += (p[0].cross(p[1]) / 6.0).as_vec3();
+                out[t[0] as usize] += (across * SIXTH).as_vec3();
+                out[t[1] as usize] += (p[2].cross(p[0]) * SIXTH).as_vec3();
+                out[t[2] as usize] += (p[0].cross(p[1]) * SIXTH).as_vec3();
             }
         }
         self.cap_gradient(x, out);
@@ -198,7 +220,7 @@ impl Gas {
     ) {
         let n = out.len();
         if self.corner_offsets.len() != n + 1 {
-            self.build_corners(triangles, n);
+            self.build_corners(triangles, face_fragment, n);
         }
         let origin = self.origins(x);
         let fragments = self.fragment_count();
@@ -222,19 +244,42 @@ impl Gas {
             for (k, g) in task.out.iter_mut().enumerate() {
                 let v = task.first + k;
                 let mut sum = Vec3::ZERO;
-                for &corner in &this.corners[this.corner_offsets[v] as usize..this.corner_offsets[v + 1] as usize] {
-                    let (face, c) = ((corner / 3) as usize, (corner % 3) as usize);
-                    let frag = face_fragment[face] as usize;
+                let p0 = x[v].as_dvec3();
+                let fan = &this.corners[this.corner_offsets[v] as usize..this.corner_offsets[v + 1] as usize];
+                if this.closed_fan[v] {
+                    // Around a closed ring `Σ (b - o)×(c - o) = Σ b×c` for any origin o, so the
+                    // gradient is summed about the vertex itself in f32: short edges, no
+                    // cancellation (about o, the f64 terms are ~|x - o|² for a sum the size of
+                    // the fan's area). Only each face's volume term (at its corner 0) needs o and
+                    // f64. On the issue-5 balloon (one thread, perf) this pass went from 9.2% of an
+                    // implicit step in f64 to 6.0%.
+                    let xv = Vec3A::from(x[v]);
+                    let mut across_sum = Vec3A::ZERO;
+                    let mut gas = false;
+                    for corner in fan {
+                        let frag = (corner.fragment_first >> 1) as usize;
+                        let (b, c) = (x[corner.next as usize], x[corner.prev as usize]);
+                        across_sum += (Vec3A::from(b) - xv).cross(Vec3A::from(c) - xv);
+                        gas |= this.n_rt[frag] > 0.0;
+                        if corner.fragment_first & 1 != 0 {
+                            let o = origin[frag];
+                            task.six_v[frag] += (p0 - o).dot((b.as_dvec3() - o).cross(c.as_dvec3() - o));
+                        }
+                    }
+                    *g = if gas { Vec3::from(across_sum * (1.0 / 6.0)) } else { Vec3::ZERO };
+                    continue;
+                }
+                for corner in fan {
+                    let frag = (corner.fragment_first >> 1) as usize;
                     let o = origin[frag];
-                    let t = triangles[face];
-                    let p = |k: usize| x[t[(c + k) % 3] as usize].as_dvec3() - o;
+                    let (p1, p2) = (x[corner.next as usize].as_dvec3() - o, x[corner.prev as usize].as_dvec3() - o);
                     // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
-                    let across = p(1).cross(p(2));
-                    if c == 0 {
-                        task.six_v[frag] += p(0).dot(across);
+                    let across = p1.cross(p2);
+                    if corner.fragment_first & 1 != 0 {
+                        task.six_v[frag] += (p0 - o).dot(across);
                     }
                     if this.n_rt[frag] > 0.0 {
-                        sum += (across / 6.0).as_vec3();
+                        sum += (across * SIXTH).as_vec3();
                     }
                 }
                 *g = sum;
@@ -252,10 +297,31 @@ impl Gas {
     }
 
     /// The corners at each vertex (CSR, faces ascending).
-    fn build_corners(&mut self, triangles: &[[u32; 3]], n: usize) {
+    fn build_corners(&mut self, triangles: &[[u32; 3]], face_fragment: &[u32], n: usize) {
         let (offsets, corners) = crate::mesh::vertex_incidence(n, triangles, |face, c| 3 * face as u32 + c as u32);
         self.corner_offsets = offsets;
-        self.corners = corners;
+        self.corners = corners
+            .iter()
+            .map(|&corner| {
+                let (face, c) = ((corner / 3) as usize, (corner % 3) as usize);
+                let t = triangles[face];
+                Corner {
+                    next: t[(c + 1) % 3],
+                    prev: t[(c + 2) % 3],
+                    fragment_first: face_fragment[face] << 1 | (c == 0) as u32,
+                }
+            })
+            .collect();
+        self.closed_fan = (0..n)
+            .map(|v| {
+                let fan = &self.corners[self.corner_offsets[v] as usize..self.corner_offsets[v + 1] as usize];
+                let mut next: Vec<u32> = fan.iter().map(|c| c.next).collect();
+                let mut prev: Vec<u32> = fan.iter().map(|c| c.prev).collect();
+                next.sort_unstable();
+                prev.sort_unstable();
+                !fan.is_empty() && next == prev
+            })
+            .collect();
     }
 
     /// The origin of each fragment's volume sums: one of its vertices (accuracy only).
@@ -314,9 +380,9 @@ impl Gas {
             let o = origin(frag as usize);
             let p = t.map(|v| x[v as usize].as_dvec3() - o);
             // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
-            out[t[0] as usize] += (p[1].cross(p[2]) / 6.0).as_vec3();
-            out[t[1] as usize] += (p[2].cross(p[0]) / 6.0).as_vec3();
-            out[t[2] as usize] += (p[0].cross(p[1]) / 6.0).as_vec3();
+            out[t[0] as usize] += (p[1].cross(p[2]) * SIXTH).as_vec3();
+            out[t[1] as usize] += (p[2].cross(p[0]) * SIXTH).as_vec3();
+            out[t[2] as usize] += (p[0].cross(p[1]) * SIXTH).as_vec3();
         }
         self.cap_gradient(x, out);
     }
@@ -442,11 +508,9 @@ impl Gas {
             + self.pressure.capacity()
             + self.open_area.capacity())
             * 8
-            + (self.vertex_fragment.capacity()
-                + self.reference_vertex.capacity()
-                + self.corner_offsets.capacity()
-                + self.corners.capacity())
-                * 4
+            + (self.vertex_fragment.capacity() + self.reference_vertex.capacity() + self.corner_offsets.capacity()) * 4
+            + self.closed_fan.capacity()
+            + self.corners.capacity() * std::mem::size_of::<Corner>()
             + self.chunk_six_v.capacity() * 8
             + self.caps.iter().map(|c| c.ring.capacity() * 4 + std::mem::size_of::<Cap>()).sum::<usize>()
     }
@@ -525,11 +589,22 @@ mod tests {
         for (a, b) in fused.iter().zip(&g) {
             assert!((*a - *b).length() < 1e-6, "{a} vs {b}");
         }
-        // The parallel gathering form: the same gradient to the bit, the same volume.
+        // The parallel gathering form: the same gradient to rounding (about the vertex itself
+        // on closed fans, the apex here; to the bit elsewhere) and for any thread count, the
+        // same volume.
+        let mut serial = vec![Vec3::ONE; 5];
+        gas.measure_with_gradient_parallel(&WorkerPool::new(1).unwrap(), &x, &t, &ff, &mut serial);
+        assert!(gas.closed_fan[4] && !gas.closed_fan[0]);
+        for (v, (a, b)) in serial.iter().zip(&fused).enumerate() {
+            assert!((*a - *b).length() <= 1e-6 * b.length(), "vertex {v}: {a} vs {b}");
+            if v != 4 {
+                assert_eq!(a, b);
+            }
+        }
         for threads in [1, 2] {
             let mut gathered = vec![Vec3::ONE; 5];
             gas.measure_with_gradient_parallel(&WorkerPool::new(threads).unwrap(), &x, &t, &ff, &mut gathered);
-            assert_eq!(gathered, fused);
+            assert_eq!(gathered, serial);
             assert!((gas.volume[0] - volume).abs() < 1e-12 && gas.open_area[0] == open);
             gas.measure_parallel(&WorkerPool::new(threads).unwrap(), &x, &t, &ff);
             assert!((gas.volume[0] - volume).abs() < 1e-12 && gas.open_area[0] == open);

@@ -33,6 +33,7 @@ use crate::parallel::WorkerPool;
 /// as `alpha I + w wᵀ` with `w = √beta u` (beta ≥ 0) in 16 bytes (w in x, y, z, alpha in the
 /// fourth lane): the products with the matrix stream this array, so its size is their speed.
 #[derive(Clone, Copy, Default)]
+#[repr(transparent)]
 struct Coupling(Vec4);
 
 impl Coupling {
@@ -81,7 +82,8 @@ impl ContactFilter {
 /// Scratch of the implicit integrator (allocated only when it is used).
 #[derive(Default)]
 pub(crate) struct ImplicitScratch {
-    /// External and gas forces at the start of the substep (the springs are added per vertex).
+    /// External and gas forces at the start of the substep (the springs are added per vertex);
+    /// only with wind: otherwise the assembly computes gravity and pressure per vertex.
     pub force: Vec<Vec3>,
     pub gradient: Vec<Vec3>,
     /// Per entry of `Springs::adjacency`: the coupling block of that (vertex, spring) pair, and
@@ -227,7 +229,9 @@ struct AssemblyTask<'a> {
     /// obstacles).
     dv: &'a mut [Vec3A],
     contact: &'a mut [ContactFilter],
-    /// Over the chunk: `Σ magnitude²`, `Σ |rhs|²` and whether a contact holds.
+    /// Over the chunk: `Σ g·Δv` per gas fragment (the start of the solve), `Σ magnitude²`,
+    /// `Σ |rhs|²` and whether a contact holds.
+    gas: &'a mut [f64],
     magnitude_squared: f64,
     rhs_squared: f64,
     any_contact: bool,
@@ -285,11 +289,14 @@ fn start_vertex(
 /// for the force scale. The second end takes the vectors negated (`u` and the velocity
 /// difference both flip sign, so they are exactly the negated values) and the same block, so
 /// each spring is computed once, not once per end.
+///
+/// 48 bytes (the force unaligned beside the stretch): the assembly gathers these per vertex in
+/// an order that jumps about the array, so their size is what that gather waits on.
 #[derive(Clone, Copy, Default)]
 struct SpringTerms {
-    force: Vec3A,
     kv: Vec3A,
     coupling: Coupling,
+    force: Vec3,
     stretch: f32,
 }
 
@@ -315,7 +322,7 @@ fn spring_terms(sys: &System, k: usize) -> SpringTerms {
     let (a, b) = spring_block_coefficients(len, rest, ks);
     let (alpha, beta) = (h2 * a, h2 * b + h * kd);
     SpringTerms {
-        force: u * (stretch + kd * along),
+        force: (u * (stretch + kd * along)).into(),
         kv: (dvel * a + u * (b * along)) * h2,
         coupling: Coupling::new(u, alpha, beta),
         stretch: stretch.abs(),
@@ -344,8 +351,9 @@ fn assemble_vertex(
     for ((slot, other), &(spring, j)) in coupling.iter_mut().zip(neighbor.iter_mut()).zip(model.springs.around(i)) {
         *other = j;
         let t = &terms[spring as usize];
-        let sign = if model.springs.ends[spring as usize][0] == i as u32 { 1.0 } else { -1.0 };
-        f += t.force * sign;
+        // `Springs::ends` holds each spring as [lower, higher] vertex.
+        let sign = if (i as u32) < j { 1.0 } else { -1.0 };
+        f += Vec3A::from(t.force) * sign;
         kv += t.kv * sign;
         *slot = t.coupling;
         let w = t.coupling.w();
@@ -379,6 +387,11 @@ struct ProductTask<'a> {
 
 /// Rows `first..` of `A input` for the system matrix `M - h² K - h D` (pinned rows zero, contact
 /// constraints filtered out when `contact` is not empty); `gas_dot` holds `Σ g·input` per fragment.
+///
+/// The couplings of each row are summed by [`row_sum`], or by [`row_sum_avx2`] two at a time
+/// when the processor has AVX2 and FMA (checked at run time: the library is built for baseline
+/// x86-64). The two sum in different orders, so results differ between such machines in the
+/// last bits, never between thread counts on one machine.
 fn product_rows(
     sys: &System,
     contact: &[ContactFilter],
@@ -386,6 +399,46 @@ fn product_rows(
     input: &[Vec3A],
     gas_dot: &[f64],
     task: &mut ProductTask,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the processor has the features the function is compiled for (checked above).
+        unsafe { product_rows_avx2(sys, contact, (coupling, neighbor), input, gas_dot, task) };
+        return;
+    }
+    product_rows_with(sys, contact, (coupling, neighbor), input, gas_dot, task, row_sum);
+}
+
+/// [`product_rows`] compiled for AVX2 and FMA.
+///
+/// # Safety
+/// The processor must have AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn product_rows_avx2(
+    sys: &System,
+    contact: &[ContactFilter],
+    coupling: (&[Coupling], &[u32]),
+    input: &[Vec3A],
+    gas_dot: &[f64],
+    task: &mut ProductTask,
+) {
+    product_rows_with(sys, contact, coupling, input, gas_dot, task, |c, n, input, xi| {
+        // SAFETY: this function runs only where AVX2 and FMA are available.
+        unsafe { row_sum_avx2(c, n, input, xi) }
+    });
+}
+
+/// The rows of [`product_rows`] with the couplings summed by `sum`.
+#[inline(always)]
+fn product_rows_with(
+    sys: &System,
+    contact: &[ContactFilter],
+    (coupling, neighbor): (&[Coupling], &[u32]),
+    input: &[Vec3A],
+    gas_dot: &[f64],
+    task: &mut ProductTask,
+    sum: impl Fn(&[Coupling], &[u32], &[Vec3A], Vec3A) -> Vec3A,
 ) {
     let model = sys.model;
     let offsets = &model.springs.offsets;
@@ -397,11 +450,8 @@ fn product_rows(
             continue;
         }
         let xi = input[i];
-        let mut acc = xi * model.mass[i];
         let (start, end) = (offsets[i] as usize, offsets[i + 1] as usize);
-        for (c, &j) in coupling[start..end].iter().zip(&neighbor[start..end]) {
-            acc += c.apply(xi - input[j as usize]);
-        }
+        let mut acc = xi * model.mass[i] + sum(&coupling[start..end], &neighbor[start..end], input, xi);
         if let Some(frag) = sys.fragment(i) {
             acc += Vec3A::from(sys.gradient[i]) * (sys.gas_coef[frag] * gas_dot[frag]) as f32;
         }
@@ -412,6 +462,73 @@ fn product_rows(
         *o = acc;
     }
     task.dot = dot;
+}
+
+/// `Σ B_c (xi - input[j_c])` over the couplings `B_c` of one row (their other ends `j_c`).
+#[inline(always)]
+fn row_sum(coupling: &[Coupling], neighbor: &[u32], input: &[Vec3A], xi: Vec3A) -> Vec3A {
+    let mut acc = Vec3A::ZERO;
+    for (c, &j) in coupling.iter().zip(neighbor) {
+        acc += c.apply(xi - input[j as usize]);
+    }
+    acc
+}
+
+/// [`row_sum`] two couplings at a time in 256-bit registers (each 128-bit half holds one
+/// coupling `(w, alpha)` and one difference `xi - input[j]`), with fused multiply-adds. On the
+/// issue-5 balloon (benches/body_balloon.rs, one thread, 10th-percentile step time, alternating
+/// runs) this and the gas corner records (`gas`) together took a step from 2.57-2.70 ms to
+/// 2.27-2.35 ms. Tried and not kept: two accumulators (one addition on the dependency chain per
+/// pair instead of two multiply-adds): no difference within the noise.
+///
+/// # Safety
+/// The processor must have AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn row_sum_avx2(coupling: &[Coupling], neighbor: &[u32], input: &[Vec3A], xi: Vec3A) -> Vec3A {
+    use std::arch::x86_64::*;
+    let count = coupling.len().min(neighbor.len());
+    // SAFETY (whole body): the intrinsics need AVX2 and FMA (the caller's contract); the loads
+    // read `coupling[k]` and `coupling[k + 1]` (k + 1 < count, 16 bytes each, contiguous) through
+    // a pointer of the slice; every `input` access is bounds-checked.
+    unsafe {
+        let x = __m128::from(xi);
+        let x2 = _mm256_set_m128(x, x);
+        // Zeroes the fourth lane of each half (Vec3A leaves it unspecified).
+        let mask = _mm256_castsi256_ps(_mm256_setr_epi32(-1, -1, -1, 0, -1, -1, -1, 0));
+        let base = coupling.as_ptr() as *const f32;
+        let mut acc = _mm256_setzero_ps();
+        let mut k = 0;
+        while k + 1 < count {
+            let c = _mm256_loadu_ps(base.add(4 * k));
+            let p = _mm256_set_m128(
+                __m128::from(input[neighbor[k + 1] as usize]),
+                __m128::from(input[neighbor[k] as usize]),
+            );
+            let d = _mm256_and_ps(_mm256_sub_ps(x2, p), mask);
+            let wd = _mm256_mul_ps(c, d);
+            let s = _mm256_hadd_ps(wd, wd);
+            let s = _mm256_hadd_ps(s, s);
+            let alpha = _mm256_permute_ps::<0xFF>(c);
+            acc = _mm256_fmadd_ps(d, alpha, acc);
+            acc = _mm256_fmadd_ps(_mm256_and_ps(c, mask), s, acc);
+            k += 2;
+        }
+        let mut sum = _mm_add_ps(_mm256_castps256_ps128(acc), _mm256_extractf128_ps::<1>(acc));
+        if k < count {
+            let c = _mm_loadu_ps(base.add(4 * k));
+            let mask = _mm256_castps256_ps128(mask);
+            let d = _mm_and_ps(_mm_sub_ps(x, __m128::from(input[neighbor[k] as usize])), mask);
+            let wd = _mm_mul_ps(c, d);
+            let s = _mm_hadd_ps(wd, wd);
+            let s = _mm_hadd_ps(s, s);
+            let alpha = _mm_permute_ps::<0xFF>(c);
+            sum = _mm_fmadd_ps(d, alpha, sum);
+            sum = _mm_fmadd_ps(_mm_and_ps(c, mask), s, sum);
+        }
+        Vec3A::from(sum)
+    }
 }
 
 /// `out = A input` in parallel chunks; returns `input·out` summed in chunk order.
@@ -433,11 +550,13 @@ fn product(
 /// `Σ g·value(i)` per gas fragment into `out` (no gas: nothing).
 fn gas_dots(sys: &System, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
     out.fill(0.0);
+    let mut run = GasRun::default();
     for (i, g) in sys.gradient.iter().enumerate() {
         if let Some(frag) = sys.fragment(i) {
-            out[frag] += Vec3A::from(*g).dot(value(i)) as f64;
+            run.add(out, frag, Vec3A::from(*g).dot(value(i)) as f64);
         }
     }
+    run.flush(out);
 }
 
 /// A chunk of the residual update.
@@ -567,6 +686,10 @@ fn update_direction(
         .collect();
     pool.for_each_task(&mut tasks, |t| {
         t.gas.fill(0.0);
+        // `Σ g·p` of the current run of vertices of one fragment, in a register: added into
+        // `t.gas` through memory at every vertex it made a chain of loads and stores that set
+        // the pace of this pass.
+        let mut run = GasRun::default();
         for k in 0..t.p.len() {
             let i = t.first + k;
             let mut zi = z[i];
@@ -580,10 +703,43 @@ fn update_direction(
             let value = zi + t.p[k] * beta;
             t.p[k] = value;
             if let Some(frag) = sys.fragment(i) {
-                t.gas[frag] += Vec3A::from(sys.gradient[i]).dot(value) as f64;
+                run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(value) as f64);
             }
         }
+        run.flush(t.gas);
     });
+}
+
+/// A running sum per fragment over consecutive vertices, added into the per-fragment sums when
+/// the fragment changes (the sums then depend only on the vertex order, not the thread count).
+struct GasRun {
+    fragment: usize,
+    sum: f64,
+}
+
+impl Default for GasRun {
+    fn default() -> Self {
+        Self { fragment: usize::MAX, sum: 0.0 }
+    }
+}
+
+impl GasRun {
+    #[inline(always)]
+    fn add(&mut self, sums: &mut [f64], fragment: usize, value: f64) {
+        if fragment != self.fragment {
+            self.flush(sums);
+            self.fragment = fragment;
+        }
+        self.sum += value;
+    }
+
+    #[inline(always)]
+    fn flush(&mut self, sums: &mut [f64]) {
+        if self.fragment != usize::MAX {
+            sums[self.fragment] += self.sum;
+        }
+        self.sum = 0.0;
+    }
 }
 
 /// `Σ g·p` per fragment from the chunks' parts (in chunk order).
@@ -613,7 +769,6 @@ pub(crate) fn substep(
     s: &mut ImplicitScratch,
 ) -> (f64, usize) {
     let n = x.len();
-    s.force.resize(n, Vec3::ZERO);
     for buffer in [&mut s.rhs, &mut s.dv, &mut s.r, &mut s.z, &mut s.p, &mut s.ap] {
         buffer.resize(n, Vec3A::ZERO);
     }
@@ -621,12 +776,25 @@ pub(crate) fn substep(
     s.inv_diag.resize(n, Mat3A::ZERO);
     s.coupling.resize(model.springs.adjacency.len(), Coupling::default());
     s.neighbor.resize(model.springs.adjacency.len(), 0);
-    let power = external_forces(model, x, v, &mut s.force);
+    // Without wind the assembly adds gravity and the pressure per vertex (two serial passes
+    // fewer); with wind the external forces are gathered here first.
+    let wind = model.has_wind();
+    let power = if wind {
+        s.force.resize(n, Vec3::ZERO);
+        external_forces(model, x, v, &mut s.force)
+    } else {
+        s.force = Vec::new();
+        0.0
+    };
     let h2 = h * h;
     let mut gas_dot_v = std::mem::take(&mut s.gas_dot_v);
     if let Some(gas) = gas.as_deref_mut() {
         s.gradient.resize(n, Vec3::ZERO);
-        add_gas_forces_parallel(model, pool, gas, x, &mut s.gradient, &mut s.force);
+        if wind {
+            add_gas_forces_parallel(model, pool, gas, x, &mut s.gradient, &mut s.force);
+        } else {
+            gas.measure_with_gradient_parallel(pool, x, model.triangles, model.face_fragment, &mut s.gradient);
+        }
         let frags = gas.fragment_count();
         s.gas_coef.clear();
         s.gas_coef.extend((0..frags).map(|f| {
@@ -677,7 +845,12 @@ pub(crate) fn substep(
     // axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can), then the
     // start of the solve (warm start, contacts).
     let any_contact;
+    let mut gas_dot = std::mem::take(&mut s.gas_dot);
+    let mut gas_partial = std::mem::take(&mut s.gas_partial);
+    let fragments = gas_dot.len();
+    gas_partial.resize(n.div_ceil(CHUNK) * fragments, 0.0);
     {
+        let mut gas_chunks = gas_partial.chunks_mut(fragments.max(1));
         let mut tasks = Vec::with_capacity(n.div_ceil(CHUNK));
         let mut coupling = &mut s.coupling[..];
         let mut neighbor = &mut s.neighbor[..];
@@ -708,6 +881,7 @@ pub(crate) fn substep(
                 magnitude,
                 dv,
                 contact: contact_head,
+                gas: if fragments > 0 { gas_chunks.next().unwrap() } else { &mut [] },
                 magnitude_squared: 0.0,
                 rhs_squared: 0.0,
                 any_contact: false,
@@ -719,14 +893,24 @@ pub(crate) fn substep(
         let previous_dv = &s.previous_dv;
         pool.for_each_task(&mut tasks, |t| {
             let mut cursor = 0;
+            t.gas.fill(0.0);
+            let mut run = GasRun::default();
             for k in 0..t.rhs.len() {
                 let i = t.first + k;
                 let count = model.springs.around(i).len();
+                // The same operations as `external_forces` and `add_gas_forces_parallel`.
+                let f = force.get(i).copied().unwrap_or_else(|| {
+                    let mut f = model.settings.gravity * model.mass[i];
+                    if let Some(frag) = sys.fragment(i) {
+                        f += sys.gradient[i] * sys.gas_pressure[frag] as f32;
+                    }
+                    f
+                });
                 let (rhs, mut inv_diag, magnitude) = assemble_vertex(
                     &sys,
                     terms,
                     i,
-                    force[i],
+                    f,
                     gas_dot_v,
                     &mut t.coupling[cursor..cursor + count],
                     &mut t.neighbor[cursor..cursor + count],
@@ -737,6 +921,9 @@ pub(crate) fn substep(
                 t.inv_diag[k] = inv_diag;
                 t.magnitude[k] = magnitude;
                 t.dv[k] = dv;
+                if let Some(frag) = sys.fragment(i) {
+                    run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(dv) as f64);
+                }
                 if let Some(slot) = t.contact.get_mut(k) {
                     *slot = filter;
                     t.any_contact |= filter != ContactFilter::Free;
@@ -744,6 +931,7 @@ pub(crate) fn substep(
                 t.magnitude_squared += (magnitude as f64) * (magnitude as f64);
                 t.rhs_squared += rhs.length_squared() as f64;
             }
+            run.flush(t.gas);
         });
         (magnitude_squared, rhs_squared) =
             tasks.iter().fold((0.0, 0.0), |(m, r), t| (m + t.magnitude_squared, r + t.rhs_squared));
@@ -755,11 +943,7 @@ pub(crate) fn substep(
     }
 
     // Preconditioned conjugate gradients (modified PCG: every vector filtered by the contacts).
-    let mut gas_dot = std::mem::take(&mut s.gas_dot);
-    let mut gas_partial = std::mem::take(&mut s.gas_partial);
-    if gas.is_some() {
-        gas_dots(&sys, |i| s.dv[i], &mut gas_dot);
-    }
+    sum_gas_partial(&gas_partial, &mut gas_dot);
     product(pool, &sys, &s.contact, (&s.coupling, &s.neighbor), &s.dv, &gas_dot, &mut s.ap);
     let mut rz = initial_residual(pool, (&mut s.r, &mut s.z), &s.rhs, &s.ap, &s.inv_diag, &s.contact, any_contact);
     // The coarse level: made once (again only if the substep length changes; after a topology
@@ -772,8 +956,6 @@ pub(crate) fn substep(
     if let Some(c) = coarse.as_mut() {
         rz += c.solve(pool, &s.r);
     }
-    let fragments = gas_dot.len();
-    gas_partial.resize(n.div_ceil(CHUNK) * fragments, 0.0);
     s.p.fill(Vec3A::ZERO);
     update_direction(pool, &sys, &mut s.p, &s.z, coarse.as_ref(), &s.contact, 0.0, &mut gas_partial, fragments);
     sum_gas_partial(&gas_partial, &mut gas_dot);

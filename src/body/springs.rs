@@ -6,7 +6,7 @@ use glam::Vec3;
 /// The springs of a body: end vertices and rest lengths, one entry per unbroken mesh edge.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Springs {
-    /// End vertices `[i, j]`.
+    /// End vertices `[i, j]`, i < j (the implicit integrator's assembly relies on it).
     pub ends: Vec<[u32; 2]>,
     /// Rest length L0, m.
     pub rest: Vec<f32>,
@@ -22,6 +22,7 @@ impl Springs {
     pub fn build_adjacency(&mut self, vertex_count: usize) {
         let mut offsets = vec![0u32; vertex_count + 1];
         for &[i, j] in &self.ends {
+            debug_assert!(i < j, "spring ends must be ordered: [{i}, {j}]");
             offsets[i as usize + 1] += 1;
             offsets[j as usize + 1] += 1;
         }
