@@ -1066,3 +1066,43 @@ pub(crate) fn substep(
     });
     (power * h as f64, iterations)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The AVX2 row sum (where the processor has it) agrees with the scalar one up to the
+    /// rounding of a different summation order, for odd and even coupling counts (the pairs and
+    /// the leftover single coupling).
+    #[test]
+    fn avx2_row_sum_agrees_with_the_scalar_one() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut unit = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let input: Vec<Vec3A> = (0..64).map(|_| Vec3A::new(unit(), unit(), unit())).collect();
+        for count in [0usize, 1, 2, 5, 6, 13] {
+            let coupling: Vec<Coupling> = (0..count)
+                .map(|_| Coupling::new(Vec3A::new(unit(), unit(), unit()), unit().abs() * 10.0, unit().abs() * 100.0))
+                .collect();
+            let neighbor: Vec<u32> = (0..count).map(|k| ((k * 7 + 3) % input.len()) as u32).collect();
+            let xi = Vec3A::new(unit(), unit(), unit());
+            let scalar = row_sum(&coupling, &neighbor, &input, xi);
+            let magnitude: f32 =
+                coupling.iter().zip(&neighbor).map(|(c, &j)| c.apply(xi - input[j as usize]).length()).sum();
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+                // SAFETY: the processor has AVX2 and FMA (checked just above).
+                let wide = unsafe { row_sum_avx2(&coupling, &neighbor, &input, xi) };
+                assert!((wide - scalar).length() <= 1e-5 * magnitude.max(1.0), "{count}: {wide} vs {scalar}");
+                assert!(count == 0 || magnitude > 1.0, "the test's sums are not trivial");
+            }
+            let expected: Vec3A =
+                coupling.iter().zip(&neighbor).fold(Vec3A::ZERO, |acc, (c, &j)| acc + c.apply(xi - input[j as usize]));
+            assert_eq!(scalar, expected);
+        }
+    }
+}
