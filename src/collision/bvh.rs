@@ -481,6 +481,27 @@ impl Bvh {
         lanes.sharing(&self.leaf_keys[k].map(key_lane))
     }
 
+    /// Calls `f(k, l)` for the slots `k` of leaf `nx` of `self` and `l` of leaf `ny` of `other`
+    /// whose boxes overlap and share no key, in order; with `after_own` (a leaf with itself)
+    /// only for `l` after `k`.
+    #[inline(always)]
+    fn leaf_pairs(&self, nx: &Node, other: &Bvh, ny: &Node, after_own: bool, mut f: impl FnMut(usize, usize)) {
+        let lanes = &other.leaf_lanes[ny.lanes as usize];
+        for k in nx.a as usize..nx.b as usize {
+            let mut mask = lanes.overlaps(&self.leaf_boxes32[k]) & !self.sharing(k, other, lanes);
+            if after_own {
+                mask &= !0u32 << (k - nx.a as usize + 1);
+            }
+            while mask != 0 {
+                let l = ny.a as usize + mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                if self.leaf_boxes[k].overlaps(&other.leaf_boxes[l]) {
+                    f(k, l);
+                }
+            }
+        }
+    }
+
     /// Calls `f(j)` for every primitive `j` whose box overlaps `query`, in a fixed order.
     pub fn for_each_overlap_of(&self, query: &Aabb, stack: &mut Vec<u32>, mut f: impl FnMut(u32)) {
         if self.nodes.is_empty() {
@@ -522,19 +543,7 @@ impl Bvh {
                 continue;
             }
             match (nx.is_leaf(), ny.is_leaf()) {
-                (true, true) => {
-                    let lanes = &other.leaf_lanes[ny.lanes as usize];
-                    for k in nx.a as usize..nx.b as usize {
-                        let mut mask = lanes.overlaps(&self.leaf_boxes32[k]) & !self.sharing(k, other, lanes);
-                        while mask != 0 {
-                            let l = ny.a as usize + mask.trailing_zeros() as usize;
-                            mask &= mask - 1;
-                            if self.leaf_boxes[k].overlaps(&other.leaf_boxes[l]) {
-                                f(self.order[k], other.order[l]);
-                            }
-                        }
-                    }
-                }
+                (true, true) => self.leaf_pairs(nx, other, ny, false, |k, l| f(self.order[k], other.order[l])),
                 // Descend into the larger internal node (or the only internal one).
                 (false, true) => stack.extend([(nx.a, y), (nx.b, y)]),
                 (true, false) => stack.extend([(x, ny.a), (x, ny.b)]),
@@ -561,21 +570,10 @@ impl Bvh {
             let nx = &self.nodes[x as usize];
             if same {
                 if nx.is_leaf() {
-                    let lanes = &self.leaf_lanes[nx.lanes as usize];
-                    for k in nx.a as usize..nx.b as usize {
-                        // Only the lanes after k's own.
-                        let mut mask = lanes.overlaps(&self.leaf_boxes32[k])
-                            & !self.sharing(k, self, lanes)
-                            & (!0u32 << (k - nx.a as usize + 1));
-                        while mask != 0 {
-                            let l = nx.a as usize + mask.trailing_zeros() as usize;
-                            mask &= mask - 1;
-                            if self.leaf_boxes[k].overlaps(&self.leaf_boxes[l]) {
-                                let (i, j) = (self.order[k], self.order[l]);
-                                f(i.min(j), i.max(j));
-                            }
-                        }
-                    }
+                    self.leaf_pairs(nx, self, nx, true, |k, l| {
+                        let (i, j) = (self.order[k], self.order[l]);
+                        f(i.min(j), i.max(j));
+                    });
                 } else {
                     stack.extend([(nx.a, nx.a, true), (nx.b, nx.b, true), (nx.a, nx.b, false)]);
                 }
@@ -586,20 +584,10 @@ impl Bvh {
                 continue;
             }
             match (nx.is_leaf(), ny.is_leaf()) {
-                (true, true) => {
-                    let lanes = &self.leaf_lanes[ny.lanes as usize];
-                    for k in nx.a as usize..nx.b as usize {
-                        let mut mask = lanes.overlaps(&self.leaf_boxes32[k]) & !self.sharing(k, self, lanes);
-                        while mask != 0 {
-                            let l = ny.a as usize + mask.trailing_zeros() as usize;
-                            mask &= mask - 1;
-                            if self.leaf_boxes[k].overlaps(&self.leaf_boxes[l]) {
-                                let (i, j) = (self.order[k], self.order[l]);
-                                f(i.min(j), i.max(j));
-                            }
-                        }
-                    }
-                }
+                (true, true) => self.leaf_pairs(nx, self, ny, false, |k, l| {
+                    let (i, j) = (self.order[k], self.order[l]);
+                    f(i.min(j), i.max(j));
+                }),
                 (false, true) => stack.extend([(nx.a, y, false), (nx.b, y, false)]),
                 (true, false) => stack.extend([(x, ny.a, false), (x, ny.b, false)]),
                 (false, false) => {
