@@ -4,29 +4,16 @@
 
 use std::time::Instant;
 
-use softshell::mesh::Topology;
+use softshell::mesh::{Topology, load_obj};
 
 #[path = "../tests/body_util/mod.rs"]
 mod body_util;
 
-/// The triangles of an OBJ file of data/ (`f` lines only).
+/// The triangles and vertex count of an OBJ file of data/.
 fn read_triangles(name: &str) -> (Vec<[u32; 3]>, usize) {
-    let path = format!("{}/data/{name}", env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-    let mut vertices = 0;
-    let mut triangles = Vec::new();
-    for line in text.lines() {
-        let mut words = line.split_whitespace();
-        match words.next() {
-            Some("v") => vertices += 1,
-            Some("f") => {
-                let f: Vec<u32> = words.map(|w| w.split('/').next().unwrap().parse::<u32>().unwrap() - 1).collect();
-                triangles.push([f[0], f[1], f[2]]);
-            }
-            _ => {}
-        }
-    }
-    (triangles, vertices)
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(name);
+    let mesh = load_obj(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+    (mesh.triangles().to_vec(), mesh.vertex_count())
 }
 
 fn time(name: &str, triangles: &[[u32; 3]], vertices: usize) {
