@@ -145,14 +145,7 @@ mod tests {
         // A torus grid with a few duplicated faces (non-manifold edges, where only the first two
         // faces count) and a degenerate one (an edge twice in one face).
         let (nu, nv) = (6u32, 5u32);
-        let id = |i: u32, j: u32| (i % nu) * nv + j % nv;
-        let mut triangles = Vec::new();
-        for i in 0..nu {
-            for j in 0..nv {
-                triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
+        let mut triangles = crate::mesh::torus_grid(nu, nv);
         triangles.extend([triangles[3], triangles[7], triangles[7], [0, 1, 0]]);
         let rest: Vec<Vec3> = (0..nu * nv).map(|k| Vec3::new(k as f32, (k * k % 7) as f32, 0.5 * k as f32)).collect();
         let topology = Topology::build(&triangles, rest.len());

@@ -26,4 +26,6 @@ pub use report::{MeshReport, first_degenerate_triangle, require_closed_oriented_
 #[cfg(feature = "body")]
 pub(crate) use topology::NO_FACE;
 pub use topology::Topology;
+#[cfg(all(test, feature = "body"))]
+pub(crate) use topology::torus_grid;
 pub use tri_mesh::TriMesh;

@@ -356,6 +356,21 @@ mod update;
 #[path = "topology_reference.rs"]
 mod reference;
 
+/// A closed triangulated torus grid of `nu` x `nv` quads (vertex `(i, j)` is `i nv + j`), for
+/// tests.
+#[cfg(test)]
+pub(crate) fn torus_grid(nu: u32, nv: u32) -> Vec<[u32; 3]> {
+    let id = |i: u32, j: u32| (i % nu) * nv + j % nv;
+    let mut t = Vec::new();
+    for i in 0..nu {
+        for j in 0..nv {
+            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    t
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -401,7 +416,7 @@ mod tests {
     /// sometimes a separate tetrahedron and a fan of many faces around one vertex.
     fn random_mesh(rng: &mut Rng, case: usize) -> (Vec<[u32; 3]>, u32) {
         let (nu, nv) = (3 + rng.below(6), 3 + rng.below(6));
-        let mut triangles = torus(nu, nv);
+        let mut triangles = torus_grid(nu, nv);
         let mut vertices = nu * nv + rng.below(4);
         triangles.retain(|_| rng.below(8) != 0);
         for t in triangles.iter_mut() {
@@ -454,19 +469,6 @@ mod tests {
             self.0 ^= self.0 >> 27;
             ((self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 32) % n as u64) as u32
         }
-    }
-
-    /// A closed triangulated torus grid of `nu` x `nv` quads.
-    fn torus(nu: u32, nv: u32) -> Vec<[u32; 3]> {
-        let id = |i: u32, j: u32| (i % nu) * nv + j % nv;
-        let mut t = Vec::new();
-        for i in 0..nu {
-            for j in 0..nv {
-                t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        t
     }
 
     #[test]
