@@ -61,6 +61,10 @@ pub struct CcdSettings {
 pub(crate) const SAMPLES: usize = 8;
 /// Bisections of the time of a certain contact (2^-16 of the interval they start from).
 const BISECTIONS: usize = 16;
+/// The bisection of a certain contact's time stops once the pair moves at most this fraction of
+/// the thickness over the interval left: the contact's weights and normal, taken there, then
+/// differ from those at the exact time by that much at most.
+const TIME_RESOLUTION: f64 = 1.0 / 256.0;
 /// Steps of the golden-section search for a pass within reach between samples.
 const GOLDEN_STEPS: usize = 24;
 
@@ -123,18 +127,31 @@ fn largest_motion(start: &[V3; 4], end: &[V3; 4], range: std::ops::Range<usize>)
 }
 
 /// The gap vectors (the first primitive's closest point minus the second's) at the times
-/// `t = k / SAMPLES`.
-fn sample_gaps(start: &[V3; 4], end: &[V3; 4], gap: impl Fn(&[DVec3; 4]) -> DVec3) -> [DVec3; SAMPLES + 1] {
+/// `t = k / SAMPLES`, in order up to the first whose length is within `reach`, and their lengths.
+/// Returns how many were sampled: all `SAMPLES + 1` when none is within reach. A contact needs
+/// the samples before it only ([`sampled_time`]), so the later ones are not computed.
+fn sample_gaps(
+    start: &[V3; 4],
+    end: &[V3; 4],
+    reach: f64,
+    gap: impl Fn(&[DVec3; 4]) -> DVec3,
+) -> ([DVec3; SAMPLES + 1], [f64; SAMPLES + 1], usize) {
     let (s, e) = (start.map(dv), end.map(dv));
-    std::array::from_fn(|k| {
+    let (mut gaps, mut lengths) = ([DVec3::ZERO; SAMPLES + 1], [f64::NAN; SAMPLES + 1]);
+    for k in 0..=SAMPLES {
         let t = k as f64 / SAMPLES as f64;
-        gap(&std::array::from_fn(|i| s[i] + (e[i] - s[i]) * t))
-    })
+        gaps[k] = gap(&std::array::from_fn(|i| s[i] + (e[i] - s[i]) * t));
+        lengths[k] = gaps[k].length();
+        if lengths[k] <= reach {
+            return (gaps, lengths, k + 1);
+        }
+    }
+    (gaps, lengths, SAMPLES + 1)
 }
 
 /// The sampled estimate of [`CcdSettings::certain_contact_slack`] from the distances `d` at the
-/// times `k / SAMPLES`: None when no sample (nor a golden-section probe) is within
-/// `reach`. `speed` bounds how fast the distance can shrink: it is the minimum over the
+/// times `k / SAMPLES` (up to the first within `reach`, all of them when none is): None when no
+/// sample (nor a golden-section probe) is within `reach`. `speed` bounds how fast the distance can shrink: it is the minimum over the
 /// primitives' points of a gap whose time derivative is at most the sum of the two largest
 /// displacements.
 fn sampled_time(
@@ -143,16 +160,17 @@ fn sampled_time(
     speed: f64,
     thickness: f64,
     reach: f64,
-    d: &[f64; SAMPLES + 1],
+    d: &[f64],
     distance: impl Fn(&[DVec3; 4]) -> f64,
 ) -> Option<f64> {
     let (s, e) = (start.map(dv), end.map(dv));
     let at = |t: f64| distance(&std::array::from_fn(|i| s[i] + (e[i] - s[i]) * t));
-    // `hit`: the sample ending the interval that holds `inside`, a time within reach.
-    let inside;
+    // `hit`: the sample ending the interval that holds `inside`, a time within reach (where the
+    // distance is `inside_distance`).
+    let (inside, inside_distance);
     let hit = match d.iter().position(|&x| x <= reach) {
         Some(k) => {
-            inside = k as f64 / SAMPLES as f64;
+            (inside, inside_distance) = (k as f64 / SAMPLES as f64, d[k]);
             k
         }
         None => {
@@ -168,11 +186,11 @@ fn sampled_time(
             let mut found = None;
             for _ in 0..GOLDEN_STEPS {
                 if da <= reach {
-                    found = Some(a);
+                    found = Some((a, da));
                     break;
                 }
                 if db <= reach {
-                    found = Some(b);
+                    found = Some((b, db));
                     break;
                 }
                 if da < db {
@@ -188,7 +206,7 @@ fn sampled_time(
                 }
             }
             // The sample interval holding the time found within reach.
-            inside = found?;
+            (inside, inside_distance) = found?;
             ((inside * SAMPLES as f64).floor() as usize + 1).min(SAMPLES)
         }
     };
@@ -205,15 +223,20 @@ fn sampled_time(
     // The bound is early by the time the pair takes to close at its largest speed; a contact's
     // normal and weights are better taken where the distance actually comes within the thickness
     // (or within reach for a near miss): bisect between the bound and the time within reach.
-    let target = if at(inside) <= thickness { thickness } else { reach };
+    let target = if inside_distance <= thickness { thickness } else { reach };
     // Plain bisection between the bound and the time within reach: a second dip of the distance
     // between them may be skipped, so the answer may come after the first contact (see
-    // `CcdSettings::certain_contact_slack`); the bound alone resolved contacts worse.
+    // `CcdSettings::certain_contact_slack`); the bound alone resolved contacts worse. It stops
+    // once the pair moves less than `TIME_RESOLUTION` of the thickness over the interval left.
     let (mut lo, mut hi) = (lower, inside);
     if !(at(lo) > target) {
         return Some(lo);
     }
+    let resolution = thickness * TIME_RESOLUTION;
     for _ in 0..BISECTIONS {
+        if (hi - lo) * speed <= resolution {
+            break;
+        }
         let mid = 0.5 * (lo + hi);
         if at(mid) <= target {
             hi = mid;
@@ -237,11 +260,12 @@ fn sampled(
     reach: f64,
     gap: impl Fn(&[DVec3; 4]) -> DVec3,
 ) -> Option<CcdOutcome> {
-    let gaps = sample_gaps(start, end, &gap);
-    let d = gaps.map(|g| g.length());
-    if let Some(toi) = sampled_time(start, end, speed, thickness, reach, &d, |x| gap(x).length()) {
+    let (gaps, d, sampled) = sample_gaps(start, end, reach, &gap);
+    if let Some(toi) = sampled_time(start, end, speed, thickness, reach, &d[..sampled], |x| gap(x).length()) {
         return Some(CcdOutcome { toi: Some(toi), stage: Stage::SampledContact, boxes: 0 });
     }
+    // No sample within reach: all of them were taken.
+    debug_assert_eq!(sampled, SAMPLES + 1);
     if separated_piecewise(start, end, first_points, &gaps, thickness, |x| gap(&x.map(dv))) {
         return Some(CcdOutcome::filtered(Stage::SampledSeparation));
     }
@@ -412,6 +436,45 @@ mod tests {
             let toi = query(&settings);
             assert!(toi.is_some(), "case {case}: contact at t = {t_star} missed");
             assert!(!exact_time || toi.unwrap() <= t_star, "case {case}: toi {} after {t_star}", toi.unwrap());
+        }
+    }
+
+    /// The shell's sampled contact time: at or before the time the distance comes within the
+    /// thickness, and late enough that the distance there exceeds the thickness by at most
+    /// [`TIME_RESOLUTION`] of it (where the contact's weights and normal are taken), for slow and
+    /// fast approaches, vertex-face and edge-edge.
+    #[test]
+    fn sampled_contact_times_resolve_the_thickness_crossing() {
+        let thickness = 1e-3;
+        for closing in [0.5, 3.0, 40.0, 1000.0] {
+            // Distance along z: 3 thicknesses at t = 0, shrinking by `closing` thicknesses per step.
+            let gap0 = 3.0 * thickness;
+            let drop = closing * thickness;
+            let crossing = (gap0 - thickness) / drop;
+            if crossing > 1.0 {
+                continue;
+            }
+            // Sliding sideways 4 times as fast: the speed bound alone would put the time early.
+            let slide = 4.0 * drop;
+            let tri = [[-20.0, -20.0, 0.0], [20.0, -20.0, 0.0], [0.0, 20.0, 0.0]];
+            let vf_start = [[0.2, 0.3, gap0], tri[0], tri[1], tri[2]];
+            let vf_end = [[0.2 + slide, 0.3, gap0 - drop], tri[0], tri[1], tri[2]];
+            let ee_start = [[-20.0, 0.1, gap0], [20.0, 0.2, gap0], [0.1, -20.0, 0.0], [0.3, 20.0, 0.0]];
+            let ee_end =
+                [[-20.0 + slide, 0.1, gap0 - drop], [20.0 + slide, 0.2, gap0 - drop], ee_start[2], ee_start[3]];
+            let vf_distance = |t: f64| (gap0 - drop * t).abs();
+            let vf = vertex_triangle_with(&vf_start, &vf_end, thickness, &shell_settings());
+            let ee = edge_edge_with(&ee_start, &ee_end, thickness, &shell_settings());
+            for (kind, outcome) in [("vertex-face", vf), ("edge-edge", ee)] {
+                assert_eq!(outcome.stage, Stage::SampledContact, "{kind}, closing {closing}");
+                let toi = outcome.toi.unwrap();
+                let distance = vf_distance(toi); // both pairs close along z from the same gap
+                assert!(toi <= crossing, "{kind}, closing {closing}: toi {toi} after {crossing}");
+                assert!(
+                    distance <= thickness * (1.0 + TIME_RESOLUTION) * (1.0 + 1e-9),
+                    "{kind}, closing {closing}: distance {distance} at toi {toi}, thickness {thickness}"
+                );
+            }
         }
     }
 
