@@ -668,18 +668,12 @@ impl SelfContact {
             }
             !only_moved || f.iter().any(|&x| x & MOVED != 0)
         };
-        // One pair: kind 0 = (vertex, face), 1 = (edge, edge).
+        // One pair whose swept boxes come within the margin: kind 0 = (vertex, face), 1 = (edge,
+        // edge). The loops below test the boxes first, so that only these pairs make the call.
         let mut test = |kind: u8, i: u32, j: u32| {
             if kind == 0 {
                 let (v, f) = (i, j);
                 let t = tris[f as usize];
-                // The cached pairs are a superset: the swept boxes decide who is a candidate.
-                // (Flags first when most pairs are not wanted.)
-                if only_moved && !(mv[v as usize] || mf[f as usize])
-                    || vb[v as usize].separated(&fb[f as usize], margin)
-                {
-                    return;
-                }
                 if t.contains(&v) || !wanted([v, t[0], t[1], t[2]]) {
                     return;
                 }
@@ -702,11 +696,6 @@ impl SelfContact {
             } else {
                 let (i, j) = (i.min(j), i.max(j));
                 let ([a, b], [c, e]) = (edges[i as usize], edges[j as usize]);
-                if only_moved && !(me[i as usize] || me[j as usize])
-                    || eb[i as usize].separated(&eb[j as usize], margin)
-                {
-                    return;
-                }
                 if a == c || a == e || b == c || b == e || !wanted([a, b, c, e]) {
                     return;
                 }
@@ -728,10 +717,18 @@ impl SelfContact {
                 }
             }
         };
+        // The cached pairs are a superset: the swept boxes decide who is a candidate (with
+        // `only_moved`, flags first: most pairs are not wanted).
         for &(v, f) in &self.vf_pairs {
+            if only_moved && !(mv[v as usize] || mf[f as usize]) || vb[v as usize].separated(&fb[f as usize], margin) {
+                continue;
+            }
             test(0, v, f);
         }
         for &(i, j) in &self.ee_pairs {
+            if only_moved && !(me[i as usize] || me[j as usize]) || eb[i as usize].separated(&eb[j as usize], margin) {
+                continue;
+            }
             test(1, i, j);
         }
         // The traversal order is fixed, but sort anyway so the projection order is the pairs'.
