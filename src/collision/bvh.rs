@@ -73,28 +73,27 @@ impl Aabb {
         let d: [f64; 3] = std::array::from_fn(|k| (self.max[k] - self.min[k]).max(0.0));
         d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
     }
-
-    fn centroid(&self, axis: usize) -> f64 {
-        0.5 * (self.min[axis] + self.max[axis])
-    }
 }
 
-/// A box in f32 for the traversals (half the memory of [`Aabb`], one SIMD compare per side),
-/// rounded outwards from the f64 box it stands for, so it always holds it.
+/// The boxes the tree holds: f32 (half the memory of [`Aabb`], one SIMD compare per side). An
+/// [`Aabb`] given to the tree is rounded outwards ([`Box32::around`]), so it always holds it.
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct Box32 {
-    lo: Vec3A,
-    hi: Vec3A,
+pub(crate) struct Box32 {
+    /// Smallest corner.
+    pub(crate) lo: Vec3A,
+    /// Largest corner.
+    pub(crate) hi: Vec3A,
 }
 
 impl Box32 {
-    const EMPTY: Box32 = Box32 { lo: Vec3A::INFINITY, hi: Vec3A::NEG_INFINITY };
+    /// The empty box (the identity of [`Box32::union`]).
+    pub(crate) const EMPTY: Box32 = Box32 { lo: Vec3A::INFINITY, hi: Vec3A::NEG_INFINITY };
 
     /// Rounded outwards without branches: moving each bound out by a relative 2^-23 plus 2^-149
     /// before the conversion (which rounds to nearest, within a relative 2^-24 or 2^-150) keeps
     /// it outside. Bounds beyond the f32 range clamp to it (an empty box stays empty); a NaN
     /// bound makes an empty box, which overlaps nothing, like the f64 comparisons.
-    fn around(b: &Aabb) -> Box32 {
+    pub(crate) fn around(b: &Aabb) -> Box32 {
         const REL: f64 = 1.0 / (1u64 << 23) as f64;
         const ABS: f64 = f32::MIN_POSITIVE as f64 / (1u64 << 23) as f64; // 2^-149
         let (lo, hi) = (DVec3::from_array(b.min), DVec3::from_array(b.max));
@@ -109,7 +108,7 @@ impl Box32 {
     }
 
     #[inline(always)]
-    fn union(&self, other: &Box32) -> Box32 {
+    pub(crate) fn union(&self, other: &Box32) -> Box32 {
         Box32 { lo: self.lo.min(other.lo), hi: self.hi.max(other.hi) }
     }
 
@@ -118,10 +117,20 @@ impl Box32 {
         (self.lo.cmple(other.lo) & other.hi.cmple(self.hi)).all()
     }
 
+    /// Whether the point lies in the box (bounds included; false for a NaN coordinate).
+    #[inline(always)]
+    pub(crate) fn contains_point(&self, p: Vec3A) -> bool {
+        (self.lo.cmple(p) & p.cmple(self.hi)).all()
+    }
+
     /// Half the surface area (0 for an empty or flat box), for the choice of the node to descend.
     fn half_area(&self) -> f32 {
         let d = (self.hi - self.lo).max(Vec3A::ZERO);
         d.x * d.y + d.y * d.z + d.z * d.x
+    }
+
+    fn centroid(&self, axis: usize) -> f32 {
+        0.5 * (self.lo[axis] + self.hi[axis])
     }
 }
 
@@ -231,7 +240,10 @@ impl LeafLanes {
 const LEAF_SIZE: usize = 8;
 const _: () = assert!(LEAF_SIZE <= 8);
 
-/// A BVH over primitive boxes `0..n`.
+/// A BVH over primitive boxes `0..n`, held in f32 ([`Box32`]): boxes given in f64 are rounded
+/// outwards, so the traversals report every pair whose f64 boxes overlap, and may report pairs
+/// within that rounding (a relative 2^-23) of overlapping; callers that need the exact f64 answer
+/// confirm the pairs reported (see [`super::candidates`]), the others take the superset.
 #[derive(Clone, Debug)]
 pub struct Bvh {
     /// Nodes in pre-order: every child comes after its parent (refit walks them backwards).
@@ -239,13 +251,10 @@ pub struct Bvh {
     /// Primitive indices, grouped by leaf.
     order: Vec<u32>,
     /// The current primitive boxes.
-    boxes: Vec<Aabb>,
+    boxes: Vec<Box32>,
     /// The same boxes in `order`'s order (`leaf_boxes[k] = boxes[order[k]]`), so that the leaf
     /// loops of a traversal read contiguous memory instead of jumping across the primitives.
-    leaf_boxes: Vec<Aabb>,
-    /// `leaf_boxes` rounded outwards to f32: the leaf loops test these first, and the exact f64
-    /// boxes only for the pairs that pass.
-    leaf_boxes32: Vec<Box32>,
+    leaf_boxes: Vec<Box32>,
     /// The same f32 boxes per leaf in lanes (leaf node `n` at `leaf_lanes[n.lanes]`, lane = slot
     /// minus the leaf's first slot), against which the traversals test a box at once.
     leaf_lanes: Vec<LeafLanes>,
@@ -272,12 +281,8 @@ impl Bvh {
         Self::build_with_keys(boxes, Vec::new())
     }
 
-    /// Builds the tree over `boxes` with a key triple per primitive (repeat a key to give fewer,
-    /// e.g. a mesh edge's two vertices as `[a, b, a]`): the traversals then never report two
-    /// primitives that share a key below 2^31 (mesh neighbours sharing a vertex), without testing
-    /// their exact boxes or calling back (a shared key from 2^31 up may be reported, see
-    /// [`key_lane`]). `keys` empty: no skipping.
-    pub fn build_with_keys(boxes: Vec<Aabb>, keys: Vec<[u32; 3]>) -> Bvh {
+    /// [`Bvh::build_with_keys`] over f32 boxes, taken as they are.
+    pub(crate) fn build32(boxes: Vec<Box32>, keys: Vec<[u32; 3]>) -> Bvh {
         assert!(keys.is_empty() || keys.len() == boxes.len(), "one key triple per primitive");
         let mut bvh = Bvh {
             leaf_keys: keys.clone(),
@@ -285,7 +290,6 @@ impl Bvh {
             nodes: Vec::new(),
             order: (0..boxes.len() as u32).collect(),
             leaf_boxes: boxes.clone(),
-            leaf_boxes32: boxes.iter().map(Box32::around).collect(),
             leaf_lanes: Vec::new(),
             slot: (0..boxes.len() as u32).collect(),
             parent: Vec::new(),
@@ -297,6 +301,15 @@ impl Bvh {
         bvh
     }
 
+    /// Builds the tree over `boxes` with a key triple per primitive (repeat a key to give fewer,
+    /// e.g. a mesh edge's two vertices as `[a, b, a]`): the traversals then never report two
+    /// primitives that share a key below 2^31 (mesh neighbours sharing a vertex), without testing
+    /// their exact boxes or calling back (a shared key from 2^31 up may be reported, see
+    /// [`key_lane`]). `keys` empty: no skipping.
+    pub fn build_with_keys(boxes: Vec<Aabb>, keys: Vec<[u32; 3]>) -> Bvh {
+        Self::build32(boxes.iter().map(Box32::around).collect(), keys)
+    }
+
     /// Number of primitives.
     pub fn len(&self) -> usize {
         self.boxes.len()
@@ -305,11 +318,6 @@ impl Bvh {
     /// True for a tree over no primitive.
     pub fn is_empty(&self) -> bool {
         self.boxes.is_empty()
-    }
-
-    /// The current box of primitive `i`.
-    pub fn primitive_box(&self, i: usize) -> &Aabb {
-        &self.boxes[i]
     }
 
     /// Rebuilds the topology of the tree from the current primitive boxes.
@@ -343,8 +351,7 @@ impl Bvh {
     /// Builds the node over `order[begin..end]` and returns its index.
     fn build_node(&mut self, begin: usize, end: usize) -> u32 {
         let index = self.nodes.len() as u32;
-        let aabb = self.order[begin..end].iter().fold(Aabb::EMPTY, |acc, &i| acc.union(&self.boxes[i as usize]));
-        let aabb = Box32::around(&aabb);
+        let aabb = self.order[begin..end].iter().fold(Box32::EMPTY, |acc, &i| acc.union(&self.boxes[i as usize]));
         let half_area = aabb.half_area();
         if end - begin <= LEAF_SIZE {
             let lanes = self.leaf_lanes.len() as u32;
@@ -354,7 +361,7 @@ impl Bvh {
         }
         self.nodes.push(Node { aabb, a: begin as u32, b: end as u32, half_area, lanes: NOT_LEAF });
         // Median split along the longest axis of the centroids' box.
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
         for &i in &self.order[begin..end] {
             for axis in 0..3 {
                 let c = self.boxes[i as usize].centroid(axis);
@@ -392,16 +399,15 @@ impl Bvh {
         }
     }
 
-    /// The boxes in leaf order, in f32 and in the lanes (after every change of the boxes; the
-    /// lanes past a leaf's primitives stay empty).
+    /// The boxes in leaf order and in the lanes (after every change of the boxes; the lanes
+    /// past a leaf's primitives stay empty).
     fn sort_leaf_boxes(&mut self) {
-        for (k, (b, &i)) in self.leaf_boxes.iter_mut().zip(&self.order).enumerate() {
+        for (b, &i) in self.leaf_boxes.iter_mut().zip(&self.order) {
             *b = self.boxes[i as usize];
-            self.leaf_boxes32[k] = Box32::around(b);
         }
         for node in self.nodes.iter().filter(|n| n.is_leaf()) {
             let lanes = &mut self.leaf_lanes[node.lanes as usize];
-            for (lane, b) in self.leaf_boxes32[node.a as usize..node.b as usize].iter().enumerate() {
+            for (lane, b) in self.leaf_boxes[node.a as usize..node.b as usize].iter().enumerate() {
                 lanes.set(lane, b);
             }
         }
@@ -411,7 +417,7 @@ impl Bvh {
     /// space the tree makes a query visit. Grows when refitting after large motions.
     pub fn looseness(&self) -> f64 {
         let internal: f64 = self.nodes.iter().filter(|n| !n.is_leaf()).map(|n| n.half_area as f64).sum();
-        let primitives: f64 = self.boxes.iter().map(Aabb::half_area).sum();
+        let primitives: f64 = self.boxes.iter().map(|b| b.half_area() as f64).sum();
         if primitives > 0.0 { internal / primitives } else { 0.0 }
     }
 
@@ -420,7 +426,21 @@ impl Bvh {
     /// built. Returns true when it rebuilt.
     pub fn update(&mut self, boxes: &[Aabb]) -> bool {
         assert_eq!(boxes.len(), self.boxes.len(), "a BVH update must keep the primitive count");
+        for (b, new) in self.boxes.iter_mut().zip(boxes) {
+            *b = Box32::around(new);
+        }
+        self.refit()
+    }
+
+    /// [`Bvh::update`] with f32 boxes, taken as they are.
+    pub(crate) fn update32(&mut self, boxes: &[Box32]) -> bool {
+        assert_eq!(boxes.len(), self.boxes.len(), "a BVH update must keep the primitive count");
         self.boxes.copy_from_slice(boxes);
+        self.refit()
+    }
+
+    /// The refit (or rebuild) of [`Bvh::update`] after the boxes changed.
+    fn refit(&mut self) -> bool {
         self.sort_leaf_boxes();
         self.refit_nodes();
         if self.looseness() > REBUILD_LOOSENESS_RATIO * self.built_looseness {
@@ -436,13 +456,11 @@ impl Bvh {
     /// primitives' depth, not the tree's size: nodes are only grown (a node keeps the space a
     /// primitive left until the next [`Bvh::update`]), so every node still holds its primitives'
     /// boxes, which is all a traversal needs.
-    pub fn update_some(&mut self, changed: &[u32], boxes: &[Aabb]) {
+    pub(crate) fn update_some(&mut self, changed: &[u32], boxes: &[Box32]) {
         for &i in changed {
-            let b = boxes[i as usize];
-            let b32 = Box32::around(&b);
-            self.boxes[i as usize] = b;
-            self.leaf_boxes[self.slot[i as usize] as usize] = b;
-            self.leaf_boxes32[self.slot[i as usize] as usize] = b32;
+            let b32 = boxes[i as usize];
+            self.boxes[i as usize] = b32;
+            self.leaf_boxes[self.slot[i as usize] as usize] = b32;
             let leaf = &self.nodes[self.leaf_of[i as usize] as usize];
             self.leaf_lanes[leaf.lanes as usize].set((self.slot[i as usize] - leaf.a) as usize, &b32);
             let mut n = self.leaf_of[i as usize];
@@ -462,7 +480,7 @@ impl Bvh {
         for n in (0..self.nodes.len()).rev() {
             let node = self.nodes[n];
             let aabb = if node.is_leaf() {
-                self.leaf_boxes32[node.a as usize..node.b as usize].iter().fold(Box32::EMPTY, |acc, b| acc.union(b))
+                self.leaf_boxes[node.a as usize..node.b as usize].iter().fold(Box32::EMPTY, |acc, b| acc.union(b))
             } else {
                 self.nodes[node.a as usize].aabb.union(&self.nodes[node.b as usize].aabb)
             };
@@ -488,41 +506,36 @@ impl Bvh {
     fn leaf_pairs(&self, nx: &Node, other: &Bvh, ny: &Node, after_own: bool, mut f: impl FnMut(usize, usize)) {
         let lanes = &other.leaf_lanes[ny.lanes as usize];
         for k in nx.a as usize..nx.b as usize {
-            let mut mask = lanes.overlaps(&self.leaf_boxes32[k]) & !self.sharing(k, other, lanes);
+            let mut mask = lanes.overlaps(&self.leaf_boxes[k]) & !self.sharing(k, other, lanes);
             if after_own {
                 mask &= !0u32 << (k - nx.a as usize + 1);
             }
             while mask != 0 {
                 let l = ny.a as usize + mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                if self.leaf_boxes[k].overlaps(&other.leaf_boxes[l]) {
-                    f(k, l);
-                }
+                f(k, l);
             }
         }
     }
 
     /// Calls `f(j)` for every primitive `j` whose box overlaps `query`, in a fixed order.
-    pub fn for_each_overlap_of(&self, query: &Aabb, stack: &mut Vec<u32>, mut f: impl FnMut(u32)) {
+    pub(crate) fn for_each_overlap_of(&self, q: &Box32, stack: &mut Vec<u32>, mut f: impl FnMut(u32)) {
         if self.nodes.is_empty() {
             return;
         }
-        let q = Box32::around(query);
         stack.clear();
         stack.push(0);
         while let Some(n) = stack.pop() {
             let node = &self.nodes[n as usize];
-            if !node.aabb.overlaps(&q) {
+            if !node.aabb.overlaps(q) {
                 continue;
             }
             if node.is_leaf() {
-                let mut mask = self.leaf_lanes[node.lanes as usize].overlaps(&q);
+                let mut mask = self.leaf_lanes[node.lanes as usize].overlaps(q);
                 while mask != 0 {
                     let k = node.a as usize + mask.trailing_zeros() as usize;
                     mask &= mask - 1;
-                    if self.leaf_boxes[k].overlaps(query) {
-                        f(self.order[k]);
-                    }
+                    f(self.order[k]);
                 }
             } else {
                 stack.extend([node.b, node.a]);
@@ -618,6 +631,24 @@ mod tests {
         out
     }
 
+    /// The pairs the tree must report: those of the boxes it holds (rounded out to f32), which
+    /// include every pair of the f64 boxes.
+    fn overlaps_brute32(a: &[Aabb], b: &[Aabb]) -> Vec<(u32, u32)> {
+        let (a32, b32): (Vec<Box32>, Vec<Box32>) =
+            (a.iter().map(Box32::around).collect(), b.iter().map(Box32::around).collect());
+        let mut out = Vec::new();
+        for (i, x) in a32.iter().enumerate() {
+            for (j, y) in b32.iter().enumerate() {
+                if x.overlaps(y) {
+                    out.push((i as u32, j as u32));
+                }
+            }
+        }
+        let exact = overlaps_brute(a, b);
+        assert!(exact.iter().all(|p| out.binary_search(p).is_ok()), "f32 boxes lost an f64 overlap");
+        out
+    }
+
     #[test]
     fn partial_updates_keep_every_overlap() {
         let mut seed = 0x2545_F491_4F6C_DD1Du64;
@@ -645,23 +676,24 @@ mod tests {
                 for &i in &changed {
                     boxes[i as usize] = random_box(0.1);
                 }
-                tree.update_some(&changed, &boxes);
+                let boxes32: Vec<Box32> = boxes.iter().map(Box32::around).collect();
+                tree.update_some(&changed, &boxes32);
             }
             let mut found = Vec::new();
             tree.for_each_overlap(&probe_tree, |i, j| found.push((i, j)));
             found.sort_unstable();
-            assert_eq!(found, overlaps_brute(&boxes, &probes), "round {round}");
+            assert_eq!(found, overlaps_brute32(&boxes, &probes), "round {round}");
             let mut one_by_one = Vec::new();
             let mut stack = Vec::new();
             for (j, p) in probes.iter().enumerate() {
-                tree.for_each_overlap_of(p, &mut stack, |i| one_by_one.push((i, j as u32)));
+                tree.for_each_overlap_of(&Box32::around(p), &mut stack, |i| one_by_one.push((i, j as u32)));
             }
             one_by_one.sort_unstable();
             assert_eq!(one_by_one, found, "round {round}");
             let mut own = Vec::new();
             tree.for_each_self_overlap(|i, j| own.push((i, j)));
             own.sort_unstable();
-            let brute: Vec<(u32, u32)> = overlaps_brute(&boxes, &boxes).into_iter().filter(|(i, j)| i < j).collect();
+            let brute: Vec<(u32, u32)> = overlaps_brute32(&boxes, &boxes).into_iter().filter(|(i, j)| i < j).collect();
             assert_eq!(own, brute, "round {round}");
         }
     }

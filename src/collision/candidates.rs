@@ -22,6 +22,11 @@ pub struct MeshBroadPhase {
     vertices: Bvh,
     edges: Bvh,
     faces: Bvh,
+    /// The boxes in f64: the trees hold them rounded out to f32, so the pairs they report are
+    /// confirmed here.
+    vertex_boxes: Vec<Aabb>,
+    edge_boxes: Vec<Aabb>,
+    face_boxes: Vec<Aabb>,
     /// Rebuilds (of any of the three trees) since creation.
     pub rebuilds: u64,
 }
@@ -51,10 +56,16 @@ impl MeshBroadPhase {
     /// given `edges` (vertex pairs) and `triangles`. `thickness` >= 0 is the contact distance.
     pub fn new(x0: &[V3], x1: &[V3], edges: &[[u32; 2]], triangles: &[[u32; 3]], thickness: f64) -> Self {
         let half = 0.5 * thickness;
+        let vertex_boxes = swept_boxes(x0, x1, &vertex_ids(x0.len()), half);
+        let edge_boxes = swept_boxes(x0, x1, edges, half);
+        let face_boxes = swept_boxes(x0, x1, triangles, half);
         Self {
-            vertices: Bvh::build(swept_boxes(x0, x1, &vertex_ids(x0.len()), half)),
-            edges: Bvh::build(swept_boxes(x0, x1, edges, half)),
-            faces: Bvh::build(swept_boxes(x0, x1, triangles, half)),
+            vertices: Bvh::build(vertex_boxes.clone()),
+            edges: Bvh::build(edge_boxes.clone()),
+            faces: Bvh::build(face_boxes.clone()),
+            vertex_boxes,
+            edge_boxes,
+            face_boxes,
             rebuilds: 0,
         }
     }
@@ -63,9 +74,12 @@ impl MeshBroadPhase {
     /// loose. Returns how many were rebuilt.
     pub fn update(&mut self, x0: &[V3], x1: &[V3], edges: &[[u32; 2]], triangles: &[[u32; 3]], thickness: f64) -> u32 {
         let half = 0.5 * thickness;
-        let rebuilt = u32::from(self.vertices.update(&swept_boxes(x0, x1, &vertex_ids(x0.len()), half)))
-            + u32::from(self.edges.update(&swept_boxes(x0, x1, edges, half)))
-            + u32::from(self.faces.update(&swept_boxes(x0, x1, triangles, half)));
+        self.vertex_boxes = swept_boxes(x0, x1, &vertex_ids(x0.len()), half);
+        self.edge_boxes = swept_boxes(x0, x1, edges, half);
+        self.face_boxes = swept_boxes(x0, x1, triangles, half);
+        let rebuilt = u32::from(self.vertices.update(&self.vertex_boxes))
+            + u32::from(self.edges.update(&self.edge_boxes))
+            + u32::from(self.faces.update(&self.face_boxes));
         self.rebuilds += u64::from(rebuilt);
         rebuilt
     }
@@ -74,15 +88,16 @@ impl MeshBroadPhase {
     pub fn candidates(&self, edges: &[[u32; 2]], triangles: &[[u32; 3]], out: &mut Candidates) {
         out.vertex_face.clear();
         out.edge_edge.clear();
+        let (vb, eb, fb) = (&self.vertex_boxes, &self.edge_boxes, &self.face_boxes);
         self.vertices.for_each_overlap(&self.faces, |v, f| {
-            if !triangles[f as usize].contains(&v) {
+            if !triangles[f as usize].contains(&v) && vb[v as usize].overlaps(&fb[f as usize]) {
                 out.vertex_face.push((v, f));
             }
         });
         self.edges.for_each_self_overlap(|i, j| {
             let [a, b] = edges[i as usize];
             let [c, d] = edges[j as usize];
-            if a != c && a != d && b != c && b != d {
+            if a != c && a != d && b != c && b != d && eb[i as usize].overlaps(&eb[j as usize]) {
                 out.edge_edge.push((i, j));
             }
         });

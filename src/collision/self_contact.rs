@@ -22,7 +22,7 @@
 
 use glam::{DVec3, Vec3, Vec3A};
 
-use super::bvh::{Aabb, Bvh, LEAF_LANES_BYTES};
+use super::bvh::{Box32, Bvh, LEAF_LANES_BYTES};
 use super::ccd::{CcdSettings, Stage, edge_edge_with, vertex_triangle_with};
 use super::filters::V3;
 use super::hull_filter::{
@@ -101,12 +101,14 @@ pub struct SelfContact {
     vertex_tree: Bvh,
     edge_tree: Bvh,
     face_tree: Bvh,
-    vertex_boxes: Vec<Aabb>,
-    edge_boxes: Vec<Aabb>,
-    face_boxes: Vec<Aabb>,
+    /// Per vertex, edge, face: the union of its vertices' reach boxes, grown by half the
+    /// thickness of the cached pairs (see [`SelfContact::ensure_pairs`]).
+    vertex_boxes: Vec<Box32>,
+    edge_boxes: Vec<Box32>,
+    face_boxes: Vec<Box32>,
     /// Per vertex: the box its positions must stay in for the cached pairs to hold (see
     /// [`SelfContact::ensure_pairs`]).
-    reach: Vec<Aabb>,
+    reach: Vec<Box32>,
     /// Cached (vertex, face) pairs sharing no vertex whose reach boxes come within
     /// `pairs_thickness`: a superset of the pairs whose swept boxes do, while every vertex stays
     /// in its reach.
@@ -150,18 +152,33 @@ pub struct SelfContact {
 /// balance refills against the size of the cache.
 const REACH_AHEAD: f32 = 3.0;
 /// See [`REACH_AHEAD`].
-const REACH_OWN: f64 = 0.5;
+const REACH_OWN: f32 = 0.5;
 /// See [`REACH_AHEAD`]: a vertex at rest in that step may start moving.
-const REACH_SHARED: f64 = 0.1;
+const REACH_SHARED: f32 = 0.1;
 
-/// The reach box of a vertex moving from `x0` to `x1` (see [`REACH_AHEAD`]).
-fn reach_box(before: Vec3, x0: Vec3, x1: Vec3, margin: f64) -> Aabb {
+/// The reach box of a vertex moving from `x0` to `x1` (see [`REACH_AHEAD`]), in f32: it must
+/// hold the positions only, which [`SelfContact::ensure_pairs`] checks exactly, so its rounding
+/// does not matter (and subtracting or adding a margin >= 0 never rounds past the point).
+fn reach_box(before: Vec3, x0: Vec3, x1: Vec3, margin: f32) -> Box32 {
     let motion = x1 - x0;
     let ahead = x1 + motion * REACH_AHEAD;
     // With the change of motion since the step before, carried on as a constant acceleration.
     let change = motion - (x0 - before);
     let accelerated = ahead + change * (0.5 * REACH_AHEAD * (REACH_AHEAD + 1.0));
-    Aabb::around(&[d(x0), d(x1), d(ahead), d(accelerated)], margin)
+    let (x0, x1, ahead, accelerated) = (Vec3A::from(x0), Vec3A::from(x1), Vec3A::from(ahead), Vec3A::from(accelerated));
+    let margin = Vec3A::splat(margin);
+    Box32 { lo: x0.min(x1).min(ahead).min(accelerated) - margin, hi: x0.max(x1).max(ahead).max(accelerated) + margin }
+}
+
+/// `b` grown by at least `g` >= 0 on every side despite the f32 rounding: each bound moves by
+/// `g (1 + 2^-18)` plus `2^-22` of its own size. Computing that shift and the sum round within a
+/// relative 2^-24 each, less than those extra terms (the sum's error is within `2^-24` of the
+/// bound plus the shift), so the computed bound is at least `g` out. Two boxes grown by `g` each
+/// therefore overlap whenever their exact gap is at most `2 g (1 + 2^-19)`.
+fn grown_outward(b: &Box32, g: f32) -> Box32 {
+    let g = g * (1.0 + 1.0 / (1u32 << 18) as f32);
+    let ulps = 1.0 / (1u32 << 22) as f32;
+    Box32 { lo: b.lo - (Vec3A::splat(g) + b.lo.abs() * ulps), hi: b.hi + (Vec3A::splat(g) + b.hi.abs() * ulps) }
 }
 /// When at most 1/this of the vertices left their reach, only their pairs are found again (kitten
 /// bench: 1/6 was at least as fast as 1/3, 1/10 and 1/20; escapes mostly come all at once).
@@ -181,15 +198,10 @@ fn d(v: Vec3) -> V3 {
     [v.x as f64, v.y as f64, v.z as f64]
 }
 
-fn fill_boxes<const N: usize>(x0: &[Vec3], x1: &[Vec3], prims: &[[u32; N]], half: f64, out: &mut [Aabb]) {
-    for (prim, b) in prims.iter().zip(out.iter_mut()) {
-        let mut points = [[0.0; 3]; 6];
-        for (k, &v) in prim.iter().enumerate() {
-            points[2 * k] = d(x0[v as usize]);
-            points[2 * k + 1] = d(x1[v as usize]);
-        }
-        *b = Aabb::around(&points[..2 * N], half);
-    }
+/// The boxes of primitives at rest at `x`.
+fn boxes_at_rest<const N: usize>(x: &[Vec3], prims: &[[u32; N]]) -> Vec<Box32> {
+    let point = |v: u32| Box32 { lo: Vec3A::from(x[v as usize]), hi: Vec3A::from(x[v as usize]) };
+    prims.iter().map(|prim| prim.iter().fold(Box32::EMPTY, |acc, &v| acc.union(&point(v)))).collect()
 }
 
 /// The box a primitive sweeps over the step: the exact bounds of its f32 positions at both ends.
@@ -318,26 +330,22 @@ fn side(n: DVec3, w_start: DVec3, w_end: DVec3) -> f64 {
 impl SelfContact {
     /// Builds the trees for a mesh at rest (`x` at both ends of the step).
     pub fn new(x: &[Vec3], edges: &[[u32; 2]], triangles: &[[u32; 3]]) -> Self {
-        let mut vertex_boxes = vec![Aabb::EMPTY; x.len()];
-        let mut edge_boxes = vec![Aabb::EMPTY; edges.len()];
-        let mut face_boxes = vec![Aabb::EMPTY; triangles.len()];
         let ids: Vec<[u32; 1]> = (0..x.len() as u32).map(|v| [v]).collect();
-        fill_boxes(x, x, &ids, 0.0, &mut vertex_boxes);
-        fill_boxes(x, x, edges, 0.0, &mut edge_boxes);
-        fill_boxes(x, x, triangles, 0.0, &mut face_boxes);
+        let (vertex_boxes, edge_boxes, face_boxes) =
+            (boxes_at_rest(x, &ids), boxes_at_rest(x, edges), boxes_at_rest(x, triangles));
         // A few contacts per hundred vertices before the first reallocation.
         let reserve = 64 + x.len() / 16;
         Self {
             edges: edges.to_vec(),
             triangles: triangles.to_vec(),
             // Keys: the vertices, so that neighbours sharing one are skipped in the traversals.
-            vertex_tree: Bvh::build_with_keys(vertex_boxes.clone(), (0..x.len() as u32).map(|v| [v; 3]).collect()),
-            edge_tree: Bvh::build_with_keys(edge_boxes.clone(), edges.iter().map(|&[a, b]| [a, b, a]).collect()),
-            face_tree: Bvh::build_with_keys(face_boxes.clone(), triangles.to_vec()),
+            vertex_tree: Bvh::build32(vertex_boxes.clone(), (0..x.len() as u32).map(|v| [v; 3]).collect()),
+            edge_tree: Bvh::build32(edge_boxes.clone(), edges.iter().map(|&[a, b]| [a, b, a]).collect()),
+            face_tree: Bvh::build32(face_boxes.clone(), triangles.to_vec()),
             vertex_boxes,
             edge_boxes,
             face_boxes,
-            reach: vec![Aabb::EMPTY; x.len()],
+            reach: vec![Box32::EMPTY; x.len()],
             // Enough for the pairs of a mesh at rest (the first step) without reallocation.
             vf_pairs: Vec::with_capacity(x.len() + 64),
             ee_pairs: Vec::with_capacity(edges.len() + 64),
@@ -375,7 +383,7 @@ impl SelfContact {
         // Per primitive: its box, the box again in leaf order, its index in the order and back.
         // Leaves hold 4 to 8 primitives, each with its lanes.
         let tree = |n: usize| {
-            n * (2 * std::mem::size_of::<Aabb>() + 8) + n.div_ceil(2) * 64 + n.div_ceil(4) * LEAF_LANES_BYTES
+            n * (2 * std::mem::size_of::<Box32>() + 8) + n.div_ceil(2) * 64 + n.div_ceil(4) * LEAF_LANES_BYTES
         };
         std::mem::size_of::<Self>()
             + b(&self.edges)
@@ -421,8 +429,8 @@ impl SelfContact {
     /// refilled. Returns the number of trees rebuilt, or None when the cache still held.
     fn ensure_pairs(&mut self, x0: &[Vec3], x1: &[Vec3], thickness: f64) -> Option<u64> {
         let n = x0.len();
-        let motion = |v: usize| (x1[v] - x0[v]).abs().max_element() as f64;
-        let outside = |r: &Aabb, v: usize| !(r.contains(&d(x0[v])) && r.contains(&d(x1[v])));
+        let motion = |v: usize| (x1[v] - x0[v]).abs().max_element();
+        let outside = |r: &Box32, v: usize| !(r.contains_point(x0[v].into()) && r.contains_point(x1[v].into()));
         if thickness <= self.pairs_thickness {
             self.escaped.clear();
             self.escaped.extend((0..n as u32).filter(|&v| outside(&self.reach[v as usize], v as usize)));
@@ -434,14 +442,16 @@ impl SelfContact {
                 return Some(0);
             }
         }
-        let largest = (0..n).map(motion).fold(0.0, f64::max);
+        let largest = (0..n).map(motion).fold(0.0, f32::max);
+        let slack = REACH_SHARED * largest + thickness as f32;
         for v in 0..n {
-            self.reach[v] =
-                reach_box(self.before[v], x0[v], x1[v], REACH_OWN * motion(v) + REACH_SHARED * largest + thickness);
+            self.reach[v] = reach_box(self.before[v], x0[v], x1[v], REACH_OWN * motion(v) + slack);
         }
-        let half = 0.5 * thickness;
+        let half = (0.5 * thickness) as f32;
         let reach = &self.reach;
-        let union = |prim: &[u32]| prim.iter().fold(Aabb::EMPTY, |acc, &v| acc.union(&reach[v as usize])).grown(half);
+        let union = |prim: &[u32]| {
+            grown_outward(&prim.iter().fold(Box32::EMPTY, |acc, &v| acc.union(&reach[v as usize])), half)
+        };
         for (v, b) in self.vertex_boxes.iter_mut().enumerate() {
             *b = union(&[v as u32]);
         }
@@ -451,9 +461,9 @@ impl SelfContact {
         for (t, b) in self.triangles.iter().zip(self.face_boxes.iter_mut()) {
             *b = union(t);
         }
-        let rebuilt = u64::from(self.vertex_tree.update(&self.vertex_boxes))
-            + u64::from(self.edge_tree.update(&self.edge_boxes))
-            + u64::from(self.face_tree.update(&self.face_boxes));
+        let rebuilt = u64::from(self.vertex_tree.update32(&self.vertex_boxes))
+            + u64::from(self.edge_tree.update32(&self.edge_boxes))
+            + u64::from(self.face_tree.update32(&self.face_boxes));
         let (tris, edges) = (&self.triangles, &self.edges);
         let (vf, ee) = (&mut self.vf_pairs, &mut self.ee_pairs);
         vf.clear();
@@ -479,18 +489,20 @@ impl SelfContact {
     /// small trees over them against the full ones. The cache then equals what a full refill
     /// with these reach boxes would hold.
     fn refill_escaped(&mut self, x0: &[Vec3], x1: &[Vec3]) {
-        let motion = |v: usize| (x1[v] - x0[v]).abs().max_element() as f64;
-        let largest = (0..x0.len()).map(motion).fold(0.0, f64::max);
+        let motion = |v: usize| (x1[v] - x0[v]).abs().max_element();
+        let largest = (0..x0.len()).map(motion).fold(0.0, f32::max);
         let thickness = self.pairs_thickness;
-        let half = 0.5 * thickness;
+        let slack = REACH_SHARED * largest + thickness as f32;
+        let half = (0.5 * thickness) as f32;
         for &v in &self.escaped {
             let v = v as usize;
-            self.reach[v] =
-                reach_box(self.before[v], x0[v], x1[v], REACH_OWN * motion(v) + REACH_SHARED * largest + thickness);
+            self.reach[v] = reach_box(self.before[v], x0[v], x1[v], REACH_OWN * motion(v) + slack);
             self.dirty_vertex[v] = true;
         }
         let reach = &self.reach;
-        let union = |prim: &[u32]| prim.iter().fold(Aabb::EMPTY, |acc, &v| acc.union(&reach[v as usize])).grown(half);
+        let union = |prim: &[u32]| {
+            grown_outward(&prim.iter().fold(Box32::EMPTY, |acc, &v| acc.union(&reach[v as usize])), half)
+        };
         let (mut mv, mut me, mut mf) = (Vec::new(), Vec::new(), Vec::new());
         for &v in &self.escaped {
             self.vertex_boxes[v as usize] = union(&[v]);
@@ -1033,16 +1045,18 @@ mod tests {
                     full += 1;
                 }
             }
-            let boxes = |prim: &[u32]| {
-                let pts: Vec<V3> = prim.iter().flat_map(|&v| [d(x[v as usize]), d(x1[v as usize])]).collect();
-                Aabb::around(&pts, 0.5 * thickness)
+            // What `detect` asks of the cache: every pair whose swept boxes are not separated.
+            let swept = |prim: &[u32]| {
+                prim.iter()
+                    .fold(SweptBox::EMPTY, |acc, &v| acc.union(&SweptBox::of_vertex(x[v as usize], x1[v as usize])))
             };
+            let meet = |p: &[u32], q: &[u32]| !swept(p).separated(&swept(q), swept_margin(thickness));
             let (mut vf, mut ee) = (sc.vf_pairs.clone(), sc.ee_pairs.clone());
             vf.sort_unstable();
             ee.sort_unstable();
             for v in 0..x.len() as u32 {
                 for (f, t) in tris.iter().enumerate() {
-                    if !t.contains(&v) && boxes(&[v]).overlaps(&boxes(t)) {
+                    if !t.contains(&v) && meet(&[v], t) {
                         assert!(vf.binary_search(&(v, f as u32)).is_ok(), "step {step}: ({v}, {f}) missing");
                     }
                 }
@@ -1050,7 +1064,7 @@ mod tests {
             for i in 0..edges.len() {
                 for j in i + 1..edges.len() {
                     let ([a, b], [c, e]) = (edges[i], edges[j]);
-                    if a != c && a != e && b != c && b != e && boxes(&edges[i]).overlaps(&boxes(&edges[j])) {
+                    if a != c && a != e && b != c && b != e && meet(&edges[i], &edges[j]) {
                         assert!(ee.binary_search(&(i as u32, j as u32)).is_ok(), "step {step}: edges {i}, {j} missing");
                     }
                 }
@@ -1063,6 +1077,23 @@ mod tests {
             x = x1;
         }
         assert!(partial > 3 && full >= 2, "partial {partial}, full {full}");
+    }
+
+    #[test]
+    fn boxes_grown_outward_grow_by_at_least_the_margin() {
+        let values = [0.0f32, 1.0, -1.0, 0.3, -0.7, 1e-30, -1e-30, 123.456, -98765.4, 3.0e7, -1.0e-3];
+        for &g in &[0.0f32, 1e-7, 1e-3, 0.25, 10.0] {
+            for &a in &values {
+                for &b in &values {
+                    let (lo, hi) = (a.min(b), a.max(b));
+                    let grown = grown_outward(&Box32 { lo: Vec3A::splat(lo), hi: Vec3A::splat(hi) }, g);
+                    for k in 0..3 {
+                        assert!(grown.lo[k] as f64 <= lo as f64 - g as f64, "lo {lo} by {g}: {}", grown.lo[k]);
+                        assert!(grown.hi[k] as f64 >= hi as f64 + g as f64, "hi {hi} by {g}: {}", grown.hi[k]);
+                    }
+                }
+            }
+        }
     }
 
     #[test]
