@@ -59,7 +59,8 @@ pub struct CcdSettings {
 
 /// Intervals of the distance samples of [`CcdSettings::certain_contact_slack`].
 pub(crate) const SAMPLES: usize = 8;
-/// Bisections of the time of a certain contact (2^-16 of the interval they start from).
+/// Half the most steps of the search for the time of a certain contact (as many bisections
+/// would leave 2^-16 of the interval they start from).
 const BISECTIONS: usize = 16;
 /// The bisection of a certain contact's time stops once the pair moves at most this fraction of
 /// the thickness over the interval left: the contact's weights and normal, taken there, then
@@ -224,24 +225,43 @@ fn sampled_time(
     // normal and weights are better taken where the distance actually comes within the thickness
     // (or within reach for a near miss): bisect between the bound and the time within reach.
     let target = if inside_distance <= thickness { thickness } else { reach };
-    // Plain bisection between the bound and the time within reach: a second dip of the distance
-    // between them may be skipped, so the answer may come after the first contact (see
-    // `CcdSettings::certain_contact_slack`); the bound alone resolved contacts worse. It stops
-    // once the pair moves less than `TIME_RESOLUTION` of the thickness over the interval left.
+    // A bracketed root search between the bound and the time within reach: a second dip of the
+    // distance between them may be skipped, so the answer may come after the first contact (see
+    // `CcdSettings::certain_contact_slack`); the bound alone resolved contacts worse. It keeps
+    // `lo` outside the target distance and stops once the distance there is within
+    // `TIME_RESOLUTION` of the thickness of it, or the pair moves less than that over the
+    // interval left. Steps are regula falsi with the Illinois weighting (the distance is smooth
+    // between samples: a few steps instead of a bisection's 6 to 10), with a bisection whenever
+    // the secant falls outside the bracket (a NaN) or stalls.
     let (mut lo, mut hi) = (lower, inside);
-    if !(at(lo) > target) {
+    let mut lo_gap = at(lo) - target;
+    if !(lo_gap > 0.0) {
         return Some(lo);
     }
     let resolution = thickness * TIME_RESOLUTION;
-    for _ in 0..BISECTIONS {
-        if (hi - lo) * speed <= resolution {
+    // The bracket's values for the secant (one of them halved after two steps on the same side).
+    let (mut lo_weight, mut hi_weight) = (lo_gap, inside_distance - target);
+    let mut last_side = 0i8;
+    for step in 0..2 * BISECTIONS {
+        if lo_gap <= resolution || (hi - lo) * speed <= resolution {
             break;
         }
-        let mid = 0.5 * (lo + hi);
-        if at(mid) <= target {
-            hi = mid;
+        let secant = hi - hi_weight * (hi - lo) / (hi_weight - lo_weight);
+        // Every fourth step bisects, so a stalling secant still shrinks the bracket.
+        let mid = if step % 4 == 3 || !(secant > lo && secant < hi) { 0.5 * (lo + hi) } else { secant };
+        let gap = at(mid) - target;
+        if gap <= 0.0 {
+            (hi, hi_weight) = (mid, gap);
+            if last_side == -1 {
+                lo_weight *= 0.5;
+            }
+            last_side = -1;
         } else {
-            lo = mid;
+            (lo, lo_gap, lo_weight) = (mid, gap, gap);
+            if last_side == 1 {
+                hi_weight *= 0.5;
+            }
+            last_side = 1;
         }
     }
     Some(lo)
