@@ -15,6 +15,7 @@
 
 use glam::{Vec3, Vec3A};
 
+#[cfg(test)]
 use crate::parallel::WorkerPool;
 
 /// Parts of the dissection with fewer vertices than this are not split further.
@@ -295,7 +296,17 @@ impl Cholesky {
     }
 
     /// `out[i] = A⁻¹ rhs` for the first `len()` entries, using `work` (resized) as scratch.
+    #[cfg(test)]
     pub fn solve(&self, pool: &WorkerPool, rhs: &[Vec3A], out: &mut [Vec3A], work: &mut Vec<Vec3A>) {
+        // Without workers nothing may call rayon (it would use the global pool).
+        let parallel = pool.threads() > 1;
+        pool.install(|| self.solve_on(parallel, rhs, out, work));
+    }
+
+    /// [`Cholesky::solve`] on the calling thread alone when `parallel` is false (inside a team
+    /// region, where the other threads wait at a barrier and take no tasks); the same bits
+    /// either way.
+    pub fn solve_on(&self, parallel: bool, rhs: &[Vec3A], out: &mut [Vec3A], work: &mut Vec<Vec3A>) {
         let n = self.len();
         work.resize(n, Vec3A::ZERO);
         for (w, &i) in work.iter_mut().zip(&self.perm) {
@@ -303,12 +314,8 @@ impl Cholesky {
         }
         let root = self.parts.len() - 1;
         let y = SharedSlice(work.as_mut_ptr(), n);
-        // Without workers nothing may call rayon (it would use the global pool).
-        let parallel = pool.threads() > 1;
-        pool.install(|| {
-            self.forward(root, y, parallel);
-            self.backward(root, y, parallel);
-        });
+        self.forward(root, y, parallel);
+        self.backward(root, y, parallel);
         for (w, &i) in work.iter().zip(&self.perm) {
             out[i as usize] = *w;
         }

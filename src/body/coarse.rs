@@ -13,6 +13,7 @@ use glam::{Vec3, Vec3A};
 
 use super::cholesky::Cholesky;
 use super::forces::Model;
+#[cfg(test)]
 use crate::parallel::WorkerPool;
 
 /// Share of a spring's `h² K_s + h K_d` in the scalar matrix: a spring stiffens only along its
@@ -166,12 +167,24 @@ impl CoarseSpace {
 
     /// Solves the coarse system for the residual `r` (summed per aggregate); returns `r·(P x)`,
     /// the coarse part of `r·z`.
+    #[cfg(test)]
     pub fn solve(&mut self, pool: &WorkerPool, r: &[Vec3A]) -> f64 {
         self.restricted.fill(Vec3A::ZERO);
         for (ri, &g) in r.iter().zip(&self.aggregate) {
             self.restricted[g as usize] += *ri;
         }
         self.factor.solve(pool, &self.restricted, &mut self.solution, &mut self.work);
+        self.restricted.iter().zip(&self.solution).map(|(a, b)| a.dot(*b) as f64).sum()
+    }
+
+    /// [`CoarseSpace::solve`] on the calling thread alone (one member of a worker team); the
+    /// same bits.
+    pub fn solve_serial(&mut self, r: &[Vec3A]) -> f64 {
+        self.restricted.fill(Vec3A::ZERO);
+        for (ri, &g) in r.iter().zip(&self.aggregate) {
+            self.restricted[g as usize] += *ri;
+        }
+        self.factor.solve_on(false, &self.restricted, &mut self.solution, &mut self.work);
         self.restricted.iter().zip(&self.solution).map(|(a, b)| a.dot(*b) as f64).sum()
     }
 

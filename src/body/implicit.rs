@@ -26,7 +26,7 @@ use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::Gas;
 use super::obstacles::{Obstacle, touching};
 use super::springs::{is_degenerate, spring_block_coefficients};
-use crate::parallel::WorkerPool;
+use crate::parallel::{SharedSlice, Team, WorkerPool};
 
 /// One spring seen from one of its ends: the block `alpha I + beta u uᵀ` of the system matrix
 /// that couples the two ends (`h²` times the stiffness block plus `h` times the damping), held
@@ -531,22 +531,6 @@ unsafe fn row_sum_avx2(coupling: &[Coupling], neighbor: &[u32], input: &[Vec3A],
     }
 }
 
-/// `out = A input` in parallel chunks; returns `input·out` summed in chunk order.
-fn product(
-    pool: &WorkerPool,
-    sys: &System,
-    contact: &[ContactFilter],
-    coupling: (&[Coupling], &[u32]),
-    input: &[Vec3A],
-    gas_dot: &[f64],
-    out: &mut [Vec3A],
-) -> f64 {
-    let mut tasks: Vec<ProductTask> =
-        out.chunks_mut(CHUNK).enumerate().map(|(c, out)| ProductTask { first: c * CHUNK, out, dot: 0.0 }).collect();
-    pool.for_each_task(&mut tasks, |t| product_rows(sys, contact, coupling, input, gas_dot, t));
-    tasks.iter().map(|t| t.dot).sum()
-}
-
 /// `Σ g·value(i)` per gas fragment into `out` (no gas: nothing).
 fn gas_dots(sys: &System, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
     out.fill(0.0);
@@ -559,21 +543,11 @@ fn gas_dots(sys: &System, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
     run.flush(out);
 }
 
-/// A chunk of the residual update.
-struct ResidualTask<'a> {
-    first: usize,
-    dv: &'a mut [Vec3A],
-    r: &'a mut [Vec3A],
-    z: &'a mut [Vec3A],
-    rr: f64,
-    rz: f64,
-}
-
-/// `Δv += α p`, `r -= α A p`, `z = M⁻¹ r` (filtered by the contacts) in parallel chunks; returns
-/// `(r·r, r·z)` summed in chunk order.
+/// `Δv += α p`, `r -= α A p`, `z = M⁻¹ r` (filtered by the contacts) on the rows `first..` of a
+/// chunk (`ap` holds the chunk's rows of `A p`); returns the chunk's `(r·r, r·z)`.
 #[allow(clippy::too_many_arguments)]
-fn update_residual(
-    pool: &WorkerPool,
+fn residual_chunk(
+    first: usize,
     (dv, r, z): (&mut [Vec3A], &mut [Vec3A], &mut [Vec3A]),
     p: &[Vec3A],
     ap: &[Vec3A],
@@ -582,45 +556,28 @@ fn update_residual(
     alpha: f32,
     any_contact: bool,
 ) -> (f64, f64) {
-    let mut tasks: Vec<ResidualTask> = dv
-        .chunks_mut(CHUNK)
-        .zip(r.chunks_mut(CHUNK))
-        .zip(z.chunks_mut(CHUNK))
-        .enumerate()
-        .map(|(c, ((dv, r), z))| ResidualTask { first: c * CHUNK, dv, r, z, rr: 0.0, rz: 0.0 })
-        .collect();
-    pool.for_each_task(&mut tasks, |t| {
-        let (mut rr, mut rz) = (0.0f64, 0.0f64);
-        for k in 0..t.dv.len() {
-            let i = t.first + k;
-            t.dv[k] += p[i] * alpha;
-            let r = t.r[k] - ap[i] * alpha;
-            let mut z = inv_diag[i] * r;
-            if any_contact {
-                z = contact[i].apply(z);
-            }
-            t.r[k] = r;
-            t.z[k] = z;
-            rr += r.length_squared() as f64;
-            rz += r.dot(z) as f64;
+    let (mut rr, mut rz) = (0.0f64, 0.0f64);
+    for k in 0..dv.len() {
+        let i = first + k;
+        dv[k] += p[i] * alpha;
+        let ri = r[k] - ap[k] * alpha;
+        let mut zi = inv_diag[i] * ri;
+        if any_contact {
+            zi = contact[i].apply(zi);
         }
-        (t.rr, t.rz) = (rr, rz);
-    });
-    tasks.iter().fold((0.0, 0.0), |(rr, rz), t| (rr + t.rr, rz + t.rz))
+        r[k] = ri;
+        z[k] = zi;
+        rr += ri.length_squared() as f64;
+        rz += ri.dot(zi) as f64;
+    }
+    (rr, rz)
 }
 
-/// A chunk of the initial residual.
-struct InitialTask<'a> {
+/// `r = rhs - A Δv`, `z = M⁻¹ r` (both filtered by the contacts) on the rows `first..` of a
+/// chunk (`ap` holds the chunk's rows of `A Δv`); returns the chunk's `r·z`.
+#[allow(clippy::too_many_arguments)]
+fn initial_chunk(
     first: usize,
-    r: &'a mut [Vec3A],
-    z: &'a mut [Vec3A],
-    rz: f64,
-}
-
-/// `r = rhs - A Δv`, `z = M⁻¹ r` (both filtered by the contacts) in parallel chunks; returns `r·z`
-/// summed in chunk order.
-fn initial_residual(
-    pool: &WorkerPool,
     (r, z): (&mut [Vec3A], &mut [Vec3A]),
     rhs: &[Vec3A],
     ap: &[Vec3A],
@@ -628,86 +585,238 @@ fn initial_residual(
     contact: &[ContactFilter],
     any_contact: bool,
 ) -> f64 {
-    let mut tasks: Vec<InitialTask> = r
-        .chunks_mut(CHUNK)
-        .zip(z.chunks_mut(CHUNK))
-        .enumerate()
-        .map(|(c, (r, z))| InitialTask { first: c * CHUNK, r, z, rz: 0.0 })
-        .collect();
-    pool.for_each_task(&mut tasks, |t| {
-        let mut rz = 0.0f64;
-        for k in 0..t.r.len() {
-            let i = t.first + k;
-            let mut r = rhs[i] - ap[i];
-            let mut z = inv_diag[i] * r;
-            if any_contact {
-                r = contact[i].apply(r);
-                z = contact[i].apply(z);
-            }
-            t.r[k] = r;
-            t.z[k] = z;
-            rz += r.dot(z) as f64;
+    let mut rz = 0.0f64;
+    for k in 0..r.len() {
+        let i = first + k;
+        let mut ri = rhs[i] - ap[k];
+        let mut zi = inv_diag[i] * ri;
+        if any_contact {
+            ri = contact[i].apply(ri);
+            zi = contact[i].apply(zi);
         }
-        t.rz = rz;
-    });
-    tasks.iter().map(|t| t.rz).sum()
+        r[k] = ri;
+        z[k] = zi;
+        rz += ri.dot(zi) as f64;
+    }
+    rz
 }
 
-/// A chunk of the search direction update, with its part of `Σ g·p` per fragment.
-struct DirectionTask<'a> {
-    first: usize,
-    p: &'a mut [Vec3A],
-    gas: &'a mut [f64],
-}
-
-/// `p = z + β p` in parallel chunks; each chunk leaves its `Σ g·p` per fragment in its part of
-/// `partial` (`fragments` entries per chunk).
+/// `p = z + β p` (z with the coarse correction) on the rows `first..` of a chunk, leaving the
+/// chunk's `Σ g·p` per fragment in `gas`.
 #[allow(clippy::too_many_arguments)]
-fn update_direction(
-    pool: &WorkerPool,
+fn direction_chunk(
     sys: &System,
+    first: usize,
     p: &mut [Vec3A],
     z: &[Vec3A],
     coarse: Option<&CoarseSpace>,
     contact: &[ContactFilter],
     beta: f32,
-    partial: &mut [f64],
-    fragments: usize,
+    gas: &mut [f64],
 ) {
-    let mut gas_chunks = partial.chunks_mut(fragments.max(1));
-    let mut tasks: Vec<DirectionTask> = p
-        .chunks_mut(CHUNK)
-        .enumerate()
-        .map(|(c, p)| DirectionTask {
-            first: c * CHUNK,
-            p,
-            gas: if fragments > 0 { gas_chunks.next().unwrap() } else { &mut [] },
-        })
-        .collect();
-    pool.for_each_task(&mut tasks, |t| {
-        t.gas.fill(0.0);
-        // `Σ g·p` of the current run of vertices of one fragment, in a register: added into
-        // `t.gas` through memory at every vertex it made a chain of loads and stores that set
-        // the pace of this pass.
-        let mut run = GasRun::default();
-        for k in 0..t.p.len() {
-            let i = t.first + k;
-            let mut zi = z[i];
-            if let Some(coarse) = coarse {
-                // The coarse correction, filtered like the rest of z.
-                if sys.model.inv_mass[i] > 0.0 {
-                    let c = coarse.correction(i);
-                    zi += contact.get(i).map_or(c, |f| f.apply(c));
-                }
-            }
-            let value = zi + t.p[k] * beta;
-            t.p[k] = value;
-            if let Some(frag) = sys.fragment(i) {
-                run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(value) as f64);
+    gas.fill(0.0);
+    // `Σ g·p` of the current run of vertices of one fragment, in a register: added into `gas`
+    // through memory at every vertex it made a chain of loads and stores that set the pace of
+    // this pass.
+    let mut run = GasRun::default();
+    for k in 0..p.len() {
+        let i = first + k;
+        let mut zi = z[i];
+        if let Some(coarse) = coarse {
+            // The coarse correction, filtered like the rest of z.
+            if sys.model.inv_mass[i] > 0.0 {
+                let c = coarse.correction(i);
+                zi += contact.get(i).map_or(c, |f| f.apply(c));
             }
         }
-        run.flush(t.gas);
-    });
+        let value = zi + p[k] * beta;
+        p[k] = value;
+        if let Some(frag) = sys.fragment(i) {
+            run.add(gas, frag, Vec3A::from(sys.gradient[i]).dot(value) as f64);
+        }
+    }
+    run.flush(gas);
+}
+
+/// What the conjugate-gradient solve reads: the system, its right side and preconditioner, and
+/// the stopping rule.
+struct SolveInput<'a> {
+    sys: &'a System<'a>,
+    contact: &'a [ContactFilter],
+    coupling: (&'a [Coupling], &'a [u32]),
+    rhs: &'a [Vec3A],
+    inv_diag: &'a [Mat3A],
+    any_contact: bool,
+    fragments: usize,
+    /// Squared residual norm at which the solve stops.
+    tolerance: f64,
+    max_iterations: usize,
+}
+
+/// The vectors of the solve: Δv (in: the start, out: the solution), the residual, the
+/// preconditioned residual, the search direction and its product with the matrix.
+struct SolveVectors<'a> {
+    dv: &'a mut [Vec3A],
+    r: &'a mut [Vec3A],
+    z: &'a mut [Vec3A],
+    p: &'a mut [Vec3A],
+    ap: &'a mut [Vec3A],
+}
+
+/// Preconditioned conjugate gradients (modified PCG: every vector filtered by the contacts) from
+/// the start in `v.dv`, whose `Σ g·Δv` per fragment and chunk is in `gas_partial`; returns the
+/// iterations.
+///
+/// The whole solve is one parallel region on a team of the pool's threads
+/// ([`WorkerPool::team`]): each member owns a fixed block of chunks of rows, the passes over them
+/// are separated by barriers, and every reduction adds the chunks' partial sums in chunk order
+/// (each member adds all of them itself, so all take the same decisions). The coarse solve runs
+/// on member 0 while the others wait. Before, each pass was a fork and join of its own (four per
+/// iteration): on the issue-5 balloon the second thread then saved about as much as the hand-offs
+/// cost.
+fn solve(
+    pool: &WorkerPool,
+    input: &SolveInput,
+    v: SolveVectors,
+    gas_partial: &mut [f64],
+    coarse: Option<&mut CoarseSpace>,
+) -> usize {
+    let SolveInput { sys, contact, coupling, rhs, inv_diag, any_contact, fragments, tolerance, max_iterations } =
+        *input;
+    let n = v.dv.len();
+    let chunks = n.div_ceil(CHUNK);
+    let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
+    let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
+    let (dv, r, z, p, ap) = (
+        SharedSlice::new(v.dv),
+        SharedSlice::new(v.r),
+        SharedSlice::new(v.z),
+        SharedSlice::new(v.p),
+        SharedSlice::new(v.ap),
+    );
+    let gas = SharedSlice::new(gas_partial);
+    let (mut chunk_pap, mut chunk_rr, mut chunk_rz) =
+        (vec![0.0f64; chunks], vec![0.0f64; chunks], vec![0.0f64; chunks]);
+    let (chunk_pap, chunk_rr, chunk_rz) =
+        (SharedSlice::new(&mut chunk_pap), SharedSlice::new(&mut chunk_rr), SharedSlice::new(&mut chunk_rz));
+    let has_coarse = coarse.is_some();
+    let coarse = std::sync::RwLock::new(coarse);
+    let coarse_rz = std::sync::atomic::AtomicU64::new(0);
+    // Member 0 solves the coarse system for the current residual; all then add its part of r·z.
+    // SAFETY (of every `whole` and `part` below): in each pass (between two barriers) a member
+    // writes only the rows of its own chunks (`mine`) of the vectors the pass updates, and reads
+    // rows of other chunks only of vectors that no member writes in that pass.
+    let coarse_part = |team: &Team| -> f64 {
+        if !has_coarse {
+            return 0.0;
+        }
+        if team.index() == 0 {
+            let mut guard = coarse.write().unwrap_or_else(|e| e.into_inner());
+            if let Some(c) = guard.as_mut() {
+                // SAFETY: nobody writes r in this pass.
+                let rz = c.solve_serial(unsafe { r.whole() });
+                coarse_rz.store(rz.to_bits(), std::sync::atomic::Ordering::Relaxed);
+            }
+        }
+        team.barrier();
+        f64::from_bits(coarse_rz.load(std::sync::atomic::Ordering::Relaxed))
+    };
+    // p = z + (coarse) + β p over the member's chunks, then everyone's Σ g·p.
+    let direction = |team: &Team, beta: f32, gas_dot: &mut [f64]| {
+        {
+            let guard = coarse.read().unwrap_or_else(|e| e.into_inner());
+            for c in team.share(chunks) {
+                // SAFETY: p and this chunk's gas sums are written by this member only; z is
+                // written by nobody in this pass.
+                let (p_rows, z_all, gas_part) = unsafe { (p.part(rows(c)), z.whole(), gas.part(gas_rows(c))) };
+                if beta == 0.0 {
+                    p_rows.fill(Vec3A::ZERO);
+                }
+                direction_chunk(sys, c * CHUNK, p_rows, z_all, guard.as_deref(), contact, beta, gas_part);
+            }
+        }
+        team.barrier();
+        // SAFETY: nobody writes the gas sums in this pass.
+        sum_gas_partial(unsafe { gas.whole() }, gas_dot);
+    };
+    pool.team(|team| {
+        let mine = team.share(chunks);
+        let mut gas_dot = vec![0.0f64; fragments];
+        // SAFETY: nobody writes the gas sums (made by the assembly) in this pass.
+        sum_gas_partial(unsafe { gas.whole() }, &mut gas_dot);
+        // r = rhs - A Δv, z = M⁻¹ r: a member's rows of r need only its own rows of A Δv, so
+        // no barrier between the two.
+        for c in mine.clone() {
+            // SAFETY: this member's chunks of ap, r, z and of the sums; Δv is written by nobody.
+            let (out, r_rows, z_rows, sum, dv_all) =
+                unsafe { (ap.part(rows(c)), r.part(rows(c)), z.part(rows(c)), chunk_rz.part(c..c + 1), dv.whole()) };
+            let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
+            product_rows(sys, contact, coupling, dv_all, &gas_dot, &mut task);
+            sum[0] = initial_chunk(c * CHUNK, (r_rows, z_rows), rhs, task.out, inv_diag, contact, any_contact);
+        }
+        team.barrier();
+        // SAFETY: nobody writes the chunks' sums in this pass.
+        let mut rz: f64 = unsafe { chunk_rz.whole() }.iter().sum();
+        rz += coarse_part(team);
+        direction(team, 0.0, &mut gas_dot);
+        let mut iterations = 0;
+        while iterations < max_iterations {
+            iterations += 1;
+            for c in mine.clone() {
+                // SAFETY: this member's chunks of ap and of the sums; p is written by nobody.
+                let (out, sum, p_all) = unsafe { (ap.part(rows(c)), chunk_pap.part(c..c + 1), p.whole()) };
+                let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
+                product_rows(sys, contact, coupling, p_all, &gas_dot, &mut task);
+                sum[0] = task.dot;
+            }
+            team.barrier();
+            // SAFETY: nobody writes the chunks' sums in this pass.
+            let pap: f64 = unsafe { chunk_pap.whole() }.iter().sum();
+            if pap <= 0.0 || !pap.is_finite() {
+                break;
+            }
+            let alpha = (rz / pap) as f32;
+            // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass.
+            for c in mine.clone() {
+                // SAFETY: this member's chunks of Δv, r, z, ap and of the sums; p is written by
+                // nobody.
+                let (dv_rows, r_rows, z_rows, ap_rows, rr, rz, p_all) = unsafe {
+                    (
+                        dv.part(rows(c)),
+                        r.part(rows(c)),
+                        z.part(rows(c)),
+                        ap.part(rows(c)),
+                        chunk_rr.part(c..c + 1),
+                        chunk_rz.part(c..c + 1),
+                        p.whole(),
+                    )
+                };
+                (rr[0], rz[0]) = residual_chunk(
+                    c * CHUNK,
+                    (dv_rows, r_rows, z_rows),
+                    p_all,
+                    ap_rows,
+                    inv_diag,
+                    contact,
+                    alpha,
+                    any_contact,
+                );
+            }
+            team.barrier();
+            // SAFETY: nobody writes the chunks' sums in this pass.
+            let (rr, rz_next) = unsafe { (chunk_rr.whole(), chunk_rz.whole()) };
+            let (rr, mut rz_next) = rr.iter().zip(rz_next).fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
+            if rr <= tolerance {
+                break;
+            }
+            rz_next += coarse_part(team);
+            let beta = (rz_next / rz) as f32;
+            rz = rz_next;
+            // p = z + β p, with Σ g·p per gas fragment in the same pass.
+            direction(team, beta, &mut gas_dot);
+        }
+        iterations
+    })
 }
 
 /// A running sum per fragment over consecutive vertices, added into the per-fragment sums when
@@ -845,7 +954,7 @@ pub(crate) fn substep(
     // axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can), then the
     // start of the solve (warm start, contacts).
     let any_contact;
-    let mut gas_dot = std::mem::take(&mut s.gas_dot);
+    let gas_dot = std::mem::take(&mut s.gas_dot);
     let mut gas_partial = std::mem::take(&mut s.gas_partial);
     let fragments = gas_dot.len();
     gas_partial.resize(n.div_ceil(CHUNK) * fragments, 0.0);
@@ -942,10 +1051,6 @@ pub(crate) fn substep(
         s.contact.clear();
     }
 
-    // Preconditioned conjugate gradients (modified PCG: every vector filtered by the contacts).
-    sum_gas_partial(&gas_partial, &mut gas_dot);
-    product(pool, &sys, &s.contact, (&s.coupling, &s.neighbor), &s.dv, &gas_dot, &mut s.ap);
-    let mut rz = initial_residual(pool, (&mut s.r, &mut s.z), &s.rhs, &s.ap, &s.inv_diag, &s.contact, any_contact);
     // The coarse level: made once (again only if the substep length changes; after a topology
     // change it is extended, not remade, so a cracking step costs no factorization).
     if s.coarse_h != h {
@@ -953,60 +1058,24 @@ pub(crate) fn substep(
         s.coarse_h = h;
     }
     let mut coarse = s.coarse.take();
-    if let Some(c) = coarse.as_mut() {
-        rz += c.solve(pool, &s.r);
-    }
-    s.p.fill(Vec3A::ZERO);
-    update_direction(pool, &sys, &mut s.p, &s.z, coarse.as_ref(), &s.contact, 0.0, &mut gas_partial, fragments);
-    sum_gas_partial(&gas_partial, &mut gas_dot);
     let force_scale = h as f64 * magnitude_squared.sqrt();
     let rhs_norm = rhs_squared.sqrt();
     let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
     let mut iterations = 0;
     if r0 > 0.0 {
-        let tolerance = r0.powi(2);
-        while iterations < max_iterations {
-            iterations += 1;
-            let pap = product(pool, &sys, &s.contact, (&s.coupling, &s.neighbor), &s.p, &gas_dot, &mut s.ap);
-            if pap <= 0.0 || !pap.is_finite() {
-                break;
-            }
-            let alpha = (rz / pap) as f32;
-            // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass, in
-            // parallel chunks whose sums are added in chunk order.
-            let (rr, rz_next) = update_residual(
-                pool,
-                (&mut s.dv, &mut s.r, &mut s.z),
-                &s.p,
-                &s.ap,
-                &s.inv_diag,
-                &s.contact,
-                alpha,
-                any_contact,
-            );
-            if rr <= tolerance {
-                break;
-            }
-            let mut rz_next = rz_next;
-            if let Some(c) = coarse.as_mut() {
-                rz_next += c.solve(pool, &s.r);
-            }
-            let beta = (rz_next / rz) as f32;
-            rz = rz_next;
-            // p = z + β p, with Σ g·p per gas fragment in the same pass.
-            update_direction(
-                pool,
-                &sys,
-                &mut s.p,
-                &s.z,
-                coarse.as_ref(),
-                &s.contact,
-                beta,
-                &mut gas_partial,
-                fragments,
-            );
-            sum_gas_partial(&gas_partial, &mut gas_dot);
-        }
+        let input = SolveInput {
+            sys: &sys,
+            contact: &s.contact,
+            coupling: (&s.coupling, &s.neighbor),
+            rhs: &s.rhs,
+            inv_diag: &s.inv_diag,
+            any_contact,
+            fragments,
+            tolerance: r0.powi(2),
+            max_iterations,
+        };
+        let vectors = SolveVectors { dv: &mut s.dv, r: &mut s.r, z: &mut s.z, p: &mut s.p, ap: &mut s.ap };
+        iterations = solve(pool, &input, vectors, &mut gas_partial, coarse.as_mut());
     }
     s.coarse = coarse;
     s.gas_partial = gas_partial;
