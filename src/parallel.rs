@@ -244,6 +244,16 @@ impl<'a, T> SharedSlice<'a, T> {
         Self { ptr: slice.as_mut_ptr(), len: slice.len(), _borrow: PhantomData }
     }
 
+    /// Elements in the slice.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// True when the slice has no elements.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
     /// The elements `range`, to write.
     ///
     /// # Safety

@@ -100,12 +100,10 @@ pub(crate) struct ImplicitScratch {
     ap: Vec<Vec3A>,
     /// The inverted 3x3 diagonal block of each vertex (the block-Jacobi preconditioner).
     inv_diag: Vec<Mat3A>,
-    /// Per vertex, the sum of the magnitudes of the forces acting on it (springs, gas, gravity):
-    /// the scale that the residual of the solve is measured against.
-    magnitude: Vec<f32>,
-    /// Per fragment `h² P/V` (gas rank-one term), `Σ g·v` and a per-fragment dot product buffer.
+    /// Per chunk of vertices, the sums of the team passes.
+    sums: ChunkSums,
+    /// Per fragment `h² P/V` (gas rank-one term); `gas_dot` only counts the fragments.
     gas_coef: Vec<f64>,
-    gas_dot_v: Vec<f64>,
     gas_dot: Vec<f64>,
     /// Per chunk of vertices and per fragment, that chunk's part of `Σ g·p`.
     gas_partial: Vec<f64>,
@@ -152,12 +150,8 @@ impl ImplicitScratch {
             + self.coupling.capacity() * std::mem::size_of::<Coupling>()
             + self.neighbor.capacity() * 4
             + self.spring_terms.capacity() * std::mem::size_of::<SpringTerms>()
-            + (self.gas_coef.capacity()
-                + self.gas_dot_v.capacity()
-                + self.gas_dot.capacity()
-                + self.gas_partial.capacity())
-                * 8
-            + self.magnitude.capacity() * 4
+            + (self.gas_coef.capacity() + self.gas_dot.capacity() + self.gas_partial.capacity()) * 8
+            + self.sums.memory_bytes()
             + self.inv_diag.capacity() * std::mem::size_of::<Mat3A>()
             + self.coarse.as_ref().map_or(0, CoarseSpace::memory_bytes)
     }
@@ -224,17 +218,67 @@ struct AssemblyTask<'a> {
     neighbor: &'a mut [u32],
     rhs: &'a mut [Vec3A],
     inv_diag: &'a mut [Mat3A],
-    magnitude: &'a mut [f32],
     /// The start of the solve: Δv (the warm start) and the contact filters (empty without
     /// obstacles).
     dv: &'a mut [Vec3A],
     contact: &'a mut [ContactFilter],
-    /// Over the chunk: `Σ g·Δv` per gas fragment (the start of the solve), `Σ magnitude²`,
-    /// `Σ |rhs|²` and whether a contact holds.
+    /// Over the chunk: `Σ g·Δv` per gas fragment (the start of the solve).
     gas: &'a mut [f64],
-    magnitude_squared: f64,
-    rhs_squared: f64,
-    any_contact: bool,
+}
+
+/// The assembly of a chunk of vertices; returns its `Σ magnitude²`, `Σ |rhs|²` and whether a
+/// contact holds.
+fn assemble_chunk(
+    sys: &System,
+    terms: &[SpringTerms],
+    force: &[Vec3],
+    previous_dv: &[Vec3A],
+    gas_dot_v: &[f64],
+    obstacles: &[Obstacle],
+    t: AssemblyTask,
+) -> (f64, f64, bool) {
+    let model = sys.model;
+    let mut cursor = 0;
+    t.gas.fill(0.0);
+    let mut run = GasRun::default();
+    let (mut magnitude_squared, mut rhs_squared, mut any_contact) = (0.0f64, 0.0f64, false);
+    for k in 0..t.rhs.len() {
+        let i = t.first + k;
+        let count = model.springs.around(i).len();
+        // The same operations as `external_forces` and `add_gas_forces_parallel`.
+        let f = force.get(i).copied().unwrap_or_else(|| {
+            let mut f = model.settings.gravity * model.mass[i];
+            if let Some(frag) = sys.fragment(i) {
+                f += sys.gradient[i] * sys.gas_pressure[frag] as f32;
+            }
+            f
+        });
+        let (rhs, mut inv_diag, magnitude) = assemble_vertex(
+            sys,
+            terms,
+            i,
+            f,
+            gas_dot_v,
+            &mut t.coupling[cursor..cursor + count],
+            &mut t.neighbor[cursor..cursor + count],
+        );
+        cursor += count;
+        let (dv, filter) = start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, previous_dv[i], &mut inv_diag);
+        t.rhs[k] = rhs;
+        t.inv_diag[k] = inv_diag;
+        t.dv[k] = dv;
+        if let Some(frag) = sys.fragment(i) {
+            run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(dv) as f64);
+        }
+        if let Some(slot) = t.contact.get_mut(k) {
+            *slot = filter;
+            any_contact |= filter != ContactFilter::Free;
+        }
+        magnitude_squared += (magnitude as f64) * (magnitude as f64);
+        rhs_squared += rhs.length_squared() as f64;
+    }
+    run.flush(t.gas);
+    (magnitude_squared, rhs_squared, any_contact)
 }
 
 /// The start of the solve at vertex i: Δv from the warm start `guess` and, if it rests on an
@@ -299,9 +343,6 @@ struct SpringTerms {
     force: Vec3,
     stretch: f32,
 }
-
-/// Springs per parallel chunk of the spring pass.
-const SPRING_CHUNK: usize = 4096;
 
 /// The terms of spring `k` (SPEC 2.1 force and damping, the stiffness block of `springs`).
 fn spring_terms(sys: &System, k: usize) -> SpringTerms {
@@ -531,13 +572,13 @@ unsafe fn row_sum_avx2(coupling: &[Coupling], neighbor: &[u32], input: &[Vec3A],
     }
 }
 
-/// `Σ g·value(i)` per gas fragment into `out` (no gas: nothing).
-fn gas_dots(sys: &System, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
+/// `Σ g·value(i)` over the vertices `rows`, per gas fragment, into `out`.
+fn gas_dots_range(sys: &System, rows: std::ops::Range<usize>, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
     out.fill(0.0);
     let mut run = GasRun::default();
-    for (i, g) in sys.gradient.iter().enumerate() {
+    for i in rows {
         if let Some(frag) = sys.fragment(i) {
-            run.add(out, frag, Vec3A::from(*g).dot(value(i)) as f64);
+            run.add(out, frag, Vec3A::from(sys.gradient[i]).dot(value(i)) as f64);
         }
     }
     run.flush(out);
@@ -653,170 +694,213 @@ struct SolveInput<'a> {
     max_iterations: usize,
 }
 
-/// The vectors of the solve: Δv (in: the start, out: the solution), the residual, the
-/// preconditioned residual, the search direction and its product with the matrix.
-struct SolveVectors<'a> {
-    dv: &'a mut [Vec3A],
-    r: &'a mut [Vec3A],
-    z: &'a mut [Vec3A],
-    p: &'a mut [Vec3A],
-    ap: &'a mut [Vec3A],
+/// The vectors and sums that the members of a team share during the assembly and the solve.
+/// SAFETY (of every `whole` and `part` on them): in each pass (between two barriers) a member
+/// writes only the rows of its own chunks (`Team::share` of the chunks) of the arrays the pass
+/// updates, and reads rows of other chunks only of arrays that no member writes in that pass.
+struct Shared<'a> {
+    coupling: SharedSlice<'a, Coupling>,
+    neighbor: SharedSlice<'a, u32>,
+    rhs: SharedSlice<'a, Vec3A>,
+    inv_diag: SharedSlice<'a, Mat3A>,
+    contact: SharedSlice<'a, ContactFilter>,
+    terms: SharedSlice<'a, SpringTerms>,
+    dv: SharedSlice<'a, Vec3A>,
+    r: SharedSlice<'a, Vec3A>,
+    z: SharedSlice<'a, Vec3A>,
+    p: SharedSlice<'a, Vec3A>,
+    ap: SharedSlice<'a, Vec3A>,
+    /// Per chunk and fragment: `Σ g·Δv` (the assembly), then `Σ g·p` (the solve).
+    gas: SharedSlice<'a, f64>,
+    /// Per chunk and fragment `Σ g·v`.
+    gas_v: SharedSlice<'a, f64>,
+    /// Per chunk: `p·Ap`, `r·r`, `r·z` of the solve; `Σ magnitude²`, `Σ |rhs|²` and whether a
+    /// contact holds (1) of the assembly.
+    chunk_pap: SharedSlice<'a, f64>,
+    chunk_rr: SharedSlice<'a, f64>,
+    chunk_rz: SharedSlice<'a, f64>,
+    chunk_magnitude: SharedSlice<'a, f64>,
+    chunk_rhs: SharedSlice<'a, f64>,
+    chunk_contact: SharedSlice<'a, bool>,
+    coarse: std::sync::RwLock<Option<&'a mut CoarseSpace>>,
+    has_coarse: bool,
+    /// The coarse part of `r·z`, from member 0 (f64 bits).
+    coarse_rz: std::sync::atomic::AtomicU64,
 }
 
-/// Preconditioned conjugate gradients (modified PCG: every vector filtered by the contacts) from
-/// the start in `v.dv`, whose `Σ g·Δv` per fragment and chunk is in `gas_partial`; returns the
-/// iterations.
-///
-/// The whole solve is one parallel region on a team of the pool's threads
-/// ([`WorkerPool::team`]): each member owns a fixed block of chunks of rows, the passes over them
-/// are separated by barriers, and every reduction adds the chunks' partial sums in chunk order
-/// (each member adds all of them itself, so all take the same decisions). The coarse solve runs
-/// on member 0 while the others wait. Before, each pass was a fork and join of its own (four per
-/// iteration): on the issue-5 balloon the second thread then saved about as much as the hand-offs
-/// cost.
-fn solve(
-    pool: &WorkerPool,
-    input: &SolveInput,
-    v: SolveVectors,
-    gas_partial: &mut [f64],
-    coarse: Option<&mut CoarseSpace>,
-) -> usize {
-    let SolveInput { sys, contact, coupling, rhs, inv_diag, any_contact, fragments, tolerance, max_iterations } =
-        *input;
-    let n = v.dv.len();
-    let chunks = n.div_ceil(CHUNK);
-    let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
-    let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
-    let (dv, r, z, p, ap) = (
-        SharedSlice::new(v.dv),
-        SharedSlice::new(v.r),
-        SharedSlice::new(v.z),
-        SharedSlice::new(v.p),
-        SharedSlice::new(v.ap),
-    );
-    let gas = SharedSlice::new(gas_partial);
-    let (mut chunk_pap, mut chunk_rr, mut chunk_rz) =
-        (vec![0.0f64; chunks], vec![0.0f64; chunks], vec![0.0f64; chunks]);
-    let (chunk_pap, chunk_rr, chunk_rz) =
-        (SharedSlice::new(&mut chunk_pap), SharedSlice::new(&mut chunk_rr), SharedSlice::new(&mut chunk_rz));
-    let has_coarse = coarse.is_some();
-    let coarse = std::sync::RwLock::new(coarse);
-    let coarse_rz = std::sync::atomic::AtomicU64::new(0);
-    // Member 0 solves the coarse system for the current residual; all then add its part of r·z.
-    // SAFETY (of every `whole` and `part` below): in each pass (between two barriers) a member
-    // writes only the rows of its own chunks (`mine`) of the vectors the pass updates, and reads
-    // rows of other chunks only of vectors that no member writes in that pass.
-    let coarse_part = |team: &Team| -> f64 {
-        if !has_coarse {
+/// Per-chunk sums of the team passes.
+#[derive(Default)]
+struct ChunkSums {
+    pap: Vec<f64>,
+    rr: Vec<f64>,
+    rz: Vec<f64>,
+    magnitude: Vec<f64>,
+    rhs: Vec<f64>,
+    contact: Vec<bool>,
+    gas_v: Vec<f64>,
+}
+
+impl ChunkSums {
+    fn resize(&mut self, chunks: usize, fragments: usize) {
+        for v in [&mut self.pap, &mut self.rr, &mut self.rz, &mut self.magnitude, &mut self.rhs] {
+            v.clear();
+            v.resize(chunks, 0.0);
+        }
+        self.contact.clear();
+        self.contact.resize(chunks, false);
+        self.gas_v.clear();
+        self.gas_v.resize(chunks * fragments, 0.0);
+    }
+
+    fn memory_bytes(&self) -> usize {
+        (self.pap.capacity()
+            + self.rr.capacity()
+            + self.rz.capacity()
+            + self.magnitude.capacity()
+            + self.rhs.capacity()
+            + self.gas_v.capacity())
+            * 8
+            + self.contact.capacity()
+    }
+}
+
+impl Shared<'_> {
+    /// Member 0 solves the coarse system for the current residual; all then add its part of r·z.
+    fn coarse_part(&self, team: &Team) -> f64 {
+        if !self.has_coarse {
             return 0.0;
         }
         if team.index() == 0 {
-            let mut guard = coarse.write().unwrap_or_else(|e| e.into_inner());
+            let mut guard = self.coarse.write().unwrap_or_else(|e| e.into_inner());
             if let Some(c) = guard.as_mut() {
                 // SAFETY: nobody writes r in this pass.
-                let rz = c.solve_serial(unsafe { r.whole() });
-                coarse_rz.store(rz.to_bits(), std::sync::atomic::Ordering::Relaxed);
+                let rz = c.solve_serial(unsafe { self.r.whole() });
+                self.coarse_rz.store(rz.to_bits(), std::sync::atomic::Ordering::Relaxed);
             }
         }
         team.barrier();
-        f64::from_bits(coarse_rz.load(std::sync::atomic::Ordering::Relaxed))
-    };
-    // p = z + (coarse) + β p over the member's chunks, then everyone's Σ g·p.
-    let direction = |team: &Team, beta: f32, gas_dot: &mut [f64]| {
+        f64::from_bits(self.coarse_rz.load(std::sync::atomic::Ordering::Relaxed))
+    }
+
+    /// p = z + (coarse) + β p over the member's chunks, then everyone's Σ g·p.
+    fn direction(&self, team: &Team, input: &SolveInput, beta: f32, gas_dot: &mut [f64]) {
+        let n = self.dv.len();
+        let chunks = n.div_ceil(CHUNK);
+        let fragments = input.fragments;
         {
-            let guard = coarse.read().unwrap_or_else(|e| e.into_inner());
+            let guard = self.coarse.read().unwrap_or_else(|e| e.into_inner());
             for c in team.share(chunks) {
+                let rows = c * CHUNK..((c + 1) * CHUNK).min(n);
                 // SAFETY: p and this chunk's gas sums are written by this member only; z is
                 // written by nobody in this pass.
-                let (p_rows, z_all, gas_part) = unsafe { (p.part(rows(c)), z.whole(), gas.part(gas_rows(c))) };
+                let (p_rows, z_all, gas_part) =
+                    unsafe { (self.p.part(rows), self.z.whole(), self.gas.part(c * fragments..(c + 1) * fragments)) };
                 if beta == 0.0 {
                     p_rows.fill(Vec3A::ZERO);
                 }
-                direction_chunk(sys, c * CHUNK, p_rows, z_all, guard.as_deref(), contact, beta, gas_part);
+                direction_chunk(input.sys, c * CHUNK, p_rows, z_all, guard.as_deref(), input.contact, beta, gas_part);
             }
         }
         team.barrier();
         // SAFETY: nobody writes the gas sums in this pass.
-        sum_gas_partial(unsafe { gas.whole() }, gas_dot);
-    };
-    pool.team(|team| {
-        let mine = team.share(chunks);
-        let mut gas_dot = vec![0.0f64; fragments];
-        // SAFETY: nobody writes the gas sums (made by the assembly) in this pass.
-        sum_gas_partial(unsafe { gas.whole() }, &mut gas_dot);
-        // r = rhs - A Δv, z = M⁻¹ r: a member's rows of r need only its own rows of A Δv, so
-        // no barrier between the two.
-        for c in mine.clone() {
-            // SAFETY: this member's chunks of ap, r, z and of the sums; Δv is written by nobody.
-            let (out, r_rows, z_rows, sum, dv_all) =
-                unsafe { (ap.part(rows(c)), r.part(rows(c)), z.part(rows(c)), chunk_rz.part(c..c + 1), dv.whole()) };
-            let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
-            product_rows(sys, contact, coupling, dv_all, &gas_dot, &mut task);
-            sum[0] = initial_chunk(c * CHUNK, (r_rows, z_rows), rhs, task.out, inv_diag, contact, any_contact);
-        }
-        team.barrier();
-        // SAFETY: nobody writes the chunks' sums in this pass.
-        let mut rz: f64 = unsafe { chunk_rz.whole() }.iter().sum();
-        rz += coarse_part(team);
-        direction(team, 0.0, &mut gas_dot);
-        let mut iterations = 0;
-        while iterations < max_iterations {
-            iterations += 1;
+        sum_gas_partial(unsafe { self.gas.whole() }, gas_dot);
+    }
+
+    /// Preconditioned conjugate gradients (modified PCG: every vector filtered by the contacts)
+    /// from the start in `dv`, whose `Σ g·Δv` per fragment and chunk is in `gas`; returns the
+    /// iterations. Run by every member of the team.
+    ///
+    /// Each member owns a fixed block of chunks of rows, the passes over them are separated by
+    /// barriers, and every reduction adds the chunks' partial sums in chunk order (each member
+    /// adds all of them itself, so all take the same decisions). The coarse solve runs on
+    /// member 0 while the others wait.
+    fn solve(&self, team: &Team, input: &SolveInput) -> usize {
+        let SolveInput { sys, contact, coupling, rhs, inv_diag, any_contact, fragments, tolerance, max_iterations } =
+            *input;
+        let Shared { dv, r, z, p, ap, gas, chunk_pap, chunk_rr, chunk_rz, .. } = self;
+        let n = dv.len();
+        let chunks = n.div_ceil(CHUNK);
+        let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
+        {
+            let mine = team.share(chunks);
+            let mut gas_dot = vec![0.0f64; fragments];
+            // SAFETY: nobody writes the gas sums (made by the assembly) in this pass.
+            sum_gas_partial(unsafe { gas.whole() }, &mut gas_dot);
+            // r = rhs - A Δv, z = M⁻¹ r: a member's rows of r need only its own rows of A Δv, so
+            // no barrier between the two.
             for c in mine.clone() {
-                // SAFETY: this member's chunks of ap and of the sums; p is written by nobody.
-                let (out, sum, p_all) = unsafe { (ap.part(rows(c)), chunk_pap.part(c..c + 1), p.whole()) };
-                let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
-                product_rows(sys, contact, coupling, p_all, &gas_dot, &mut task);
-                sum[0] = task.dot;
-            }
-            team.barrier();
-            // SAFETY: nobody writes the chunks' sums in this pass.
-            let pap: f64 = unsafe { chunk_pap.whole() }.iter().sum();
-            if pap <= 0.0 || !pap.is_finite() {
-                break;
-            }
-            let alpha = (rz / pap) as f32;
-            // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass.
-            for c in mine.clone() {
-                // SAFETY: this member's chunks of Δv, r, z, ap and of the sums; p is written by
-                // nobody.
-                let (dv_rows, r_rows, z_rows, ap_rows, rr, rz, p_all) = unsafe {
-                    (
-                        dv.part(rows(c)),
-                        r.part(rows(c)),
-                        z.part(rows(c)),
-                        ap.part(rows(c)),
-                        chunk_rr.part(c..c + 1),
-                        chunk_rz.part(c..c + 1),
-                        p.whole(),
-                    )
+                // SAFETY: this member's chunks of ap, r, z and of the sums; Δv is written by nobody.
+                let (out, r_rows, z_rows, sum, dv_all) = unsafe {
+                    (ap.part(rows(c)), r.part(rows(c)), z.part(rows(c)), chunk_rz.part(c..c + 1), dv.whole())
                 };
-                (rr[0], rz[0]) = residual_chunk(
-                    c * CHUNK,
-                    (dv_rows, r_rows, z_rows),
-                    p_all,
-                    ap_rows,
-                    inv_diag,
-                    contact,
-                    alpha,
-                    any_contact,
-                );
+                let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
+                product_rows(sys, contact, coupling, dv_all, &gas_dot, &mut task);
+                sum[0] = initial_chunk(c * CHUNK, (r_rows, z_rows), rhs, task.out, inv_diag, contact, any_contact);
             }
             team.barrier();
             // SAFETY: nobody writes the chunks' sums in this pass.
-            let (rr, rz_next) = unsafe { (chunk_rr.whole(), chunk_rz.whole()) };
-            let (rr, mut rz_next) = rr.iter().zip(rz_next).fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
-            if rr <= tolerance {
-                break;
+            let mut rz: f64 = unsafe { chunk_rz.whole() }.iter().sum();
+            rz += self.coarse_part(team);
+            self.direction(team, input, 0.0, &mut gas_dot);
+            let mut iterations = 0;
+            while iterations < max_iterations {
+                iterations += 1;
+                for c in mine.clone() {
+                    // SAFETY: this member's chunks of ap and of the sums; p is written by nobody.
+                    let (out, sum, p_all) = unsafe { (ap.part(rows(c)), chunk_pap.part(c..c + 1), p.whole()) };
+                    let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
+                    product_rows(sys, contact, coupling, p_all, &gas_dot, &mut task);
+                    sum[0] = task.dot;
+                }
+                team.barrier();
+                // SAFETY: nobody writes the chunks' sums in this pass.
+                let pap: f64 = unsafe { chunk_pap.whole() }.iter().sum();
+                if pap <= 0.0 || !pap.is_finite() {
+                    break;
+                }
+                let alpha = (rz / pap) as f32;
+                // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass.
+                for c in mine.clone() {
+                    // SAFETY: this member's chunks of Δv, r, z, ap and of the sums; p is written by
+                    // nobody.
+                    let (dv_rows, r_rows, z_rows, ap_rows, rr, rz, p_all) = unsafe {
+                        (
+                            dv.part(rows(c)),
+                            r.part(rows(c)),
+                            z.part(rows(c)),
+                            ap.part(rows(c)),
+                            chunk_rr.part(c..c + 1),
+                            chunk_rz.part(c..c + 1),
+                            p.whole(),
+                        )
+                    };
+                    (rr[0], rz[0]) = residual_chunk(
+                        c * CHUNK,
+                        (dv_rows, r_rows, z_rows),
+                        p_all,
+                        ap_rows,
+                        inv_diag,
+                        contact,
+                        alpha,
+                        any_contact,
+                    );
+                }
+                team.barrier();
+                // SAFETY: nobody writes the chunks' sums in this pass.
+                let (rr, rz_next) = unsafe { (chunk_rr.whole(), chunk_rz.whole()) };
+                let (rr, mut rz_next) = rr.iter().zip(rz_next).fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
+                if rr <= tolerance {
+                    break;
+                }
+                rz_next += self.coarse_part(team);
+                let beta = (rz_next / rz) as f32;
+                rz = rz_next;
+                // p = z + β p, with Σ g·p per gas fragment in the same pass.
+                self.direction(team, input, beta, &mut gas_dot);
             }
-            rz_next += coarse_part(team);
-            let beta = (rz_next / rz) as f32;
-            rz = rz_next;
-            // p = z + β p, with Σ g·p per gas fragment in the same pass.
-            direction(team, beta, &mut gas_dot);
+            iterations
         }
-        iterations
-    })
+    }
 }
 
 /// A running sum per fragment over consecutive vertices, added into the per-fragment sums when
@@ -881,7 +965,6 @@ pub(crate) fn substep(
     for buffer in [&mut s.rhs, &mut s.dv, &mut s.r, &mut s.z, &mut s.p, &mut s.ap] {
         buffer.resize(n, Vec3A::ZERO);
     }
-    s.magnitude.resize(n, 0.0);
     s.inv_diag.resize(n, Mat3A::ZERO);
     s.coupling.resize(model.springs.adjacency.len(), Coupling::default());
     s.neighbor.resize(model.springs.adjacency.len(), 0);
@@ -896,7 +979,6 @@ pub(crate) fn substep(
         0.0
     };
     let h2 = h * h;
-    let mut gas_dot_v = std::mem::take(&mut s.gas_dot_v);
     if let Some(gas) = gas.as_deref_mut() {
         s.gradient.resize(n, Vec3::ZERO);
         if wind {
@@ -911,7 +993,6 @@ pub(crate) fn substep(
             if gas.pressure[f] > 0.0 && vol > 0.0 { (h2 as f64) * gas.pressure[f] / vol } else { 0.0 }
         }));
         s.gas_dot.resize(frags, 0.0);
-        gas_dot_v.resize(frags, 0.0);
     }
     let no_gas: [u32; 0] = [];
     let sys = System {
@@ -924,18 +1005,8 @@ pub(crate) fn substep(
         gas_coef: &s.gas_coef,
         gas_pressure: gas.as_deref().map_or(&[][..], |g| &g.pressure),
     };
-    if gas.is_some() {
-        gas_dots(&sys, |i| Vec3A::from(v[i]), &mut gas_dot_v);
-    }
-
-    let (magnitude_squared, rhs_squared): (f64, f64);
     // Each spring's terms once, then each vertex gathers its springs'.
     s.spring_terms.resize(model.springs.len(), SpringTerms::default());
-    pool.for_each_chunk_mut(&mut s.spring_terms, SPRING_CHUNK, |c, chunk| {
-        for (k, t) in chunk.iter_mut().enumerate() {
-            *t = spring_terms(&sys, c * SPRING_CHUNK + k);
-        }
-    });
     // The warm start: the previous substep's Δv (the velocity change varies slowly from step
     // to step), or on the first substep the free-fall guess Δv = h g: either solves the rigid
     // translation, the mode that a Jacobi preconditioner dominated by stiff springs resolves
@@ -949,108 +1020,10 @@ pub(crate) fn substep(
     if !obstacles.is_empty() {
         s.contact.resize(n, ContactFilter::Free);
     }
-    // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner (per
-    // vertex the springs are stiff along the surface and soft across it, which a diagonal (per
-    // axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can), then the
-    // start of the solve (warm start, contacts).
-    let any_contact;
-    let gas_dot = std::mem::take(&mut s.gas_dot);
-    let mut gas_partial = std::mem::take(&mut s.gas_partial);
-    let fragments = gas_dot.len();
-    gas_partial.resize(n.div_ceil(CHUNK) * fragments, 0.0);
-    {
-        let mut gas_chunks = gas_partial.chunks_mut(fragments.max(1));
-        let mut tasks = Vec::with_capacity(n.div_ceil(CHUNK));
-        let mut coupling = &mut s.coupling[..];
-        let mut neighbor = &mut s.neighbor[..];
-        let mut contact = &mut s.contact[..];
-        let chunks = s
-            .rhs
-            .chunks_mut(CHUNK)
-            .zip(s.inv_diag.chunks_mut(CHUNK))
-            .zip(s.magnitude.chunks_mut(CHUNK))
-            .zip(s.dv.chunks_mut(CHUNK));
-        for (c, (((rhs, inv_diag), magnitude), dv)) in chunks.enumerate() {
-            let first = c * CHUNK;
-            let end = first + rhs.len();
-            let len = (model.springs.offsets[end] - model.springs.offsets[first]) as usize;
-            let (head, tail) = std::mem::take(&mut coupling).split_at_mut(len);
-            coupling = tail;
-            let (neighbor_head, neighbor_tail) = std::mem::take(&mut neighbor).split_at_mut(len);
-            neighbor = neighbor_tail;
-            let contact_len = if contact.is_empty() { 0 } else { rhs.len() };
-            let (contact_head, contact_tail) = std::mem::take(&mut contact).split_at_mut(contact_len);
-            contact = contact_tail;
-            tasks.push(AssemblyTask {
-                first,
-                coupling: head,
-                neighbor: neighbor_head,
-                rhs,
-                inv_diag,
-                magnitude,
-                dv,
-                contact: contact_head,
-                gas: if fragments > 0 { gas_chunks.next().unwrap() } else { &mut [] },
-                magnitude_squared: 0.0,
-                rhs_squared: 0.0,
-                any_contact: false,
-            });
-        }
-        let force = &s.force;
-        let gas_dot_v = &gas_dot_v;
-        let terms = &s.spring_terms;
-        let previous_dv = &s.previous_dv;
-        pool.for_each_task(&mut tasks, |t| {
-            let mut cursor = 0;
-            t.gas.fill(0.0);
-            let mut run = GasRun::default();
-            for k in 0..t.rhs.len() {
-                let i = t.first + k;
-                let count = model.springs.around(i).len();
-                // The same operations as `external_forces` and `add_gas_forces_parallel`.
-                let f = force.get(i).copied().unwrap_or_else(|| {
-                    let mut f = model.settings.gravity * model.mass[i];
-                    if let Some(frag) = sys.fragment(i) {
-                        f += sys.gradient[i] * sys.gas_pressure[frag] as f32;
-                    }
-                    f
-                });
-                let (rhs, mut inv_diag, magnitude) = assemble_vertex(
-                    &sys,
-                    terms,
-                    i,
-                    f,
-                    gas_dot_v,
-                    &mut t.coupling[cursor..cursor + count],
-                    &mut t.neighbor[cursor..cursor + count],
-                );
-                cursor += count;
-                let (dv, filter) = start_vertex(model, obstacles, i, x[i], v[i], rhs, previous_dv[i], &mut inv_diag);
-                t.rhs[k] = rhs;
-                t.inv_diag[k] = inv_diag;
-                t.magnitude[k] = magnitude;
-                t.dv[k] = dv;
-                if let Some(frag) = sys.fragment(i) {
-                    run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(dv) as f64);
-                }
-                if let Some(slot) = t.contact.get_mut(k) {
-                    *slot = filter;
-                    t.any_contact |= filter != ContactFilter::Free;
-                }
-                t.magnitude_squared += (magnitude as f64) * (magnitude as f64);
-                t.rhs_squared += rhs.length_squared() as f64;
-            }
-            run.flush(t.gas);
-        });
-        (magnitude_squared, rhs_squared) =
-            tasks.iter().fold((0.0, 0.0), |(m, r), t| (m + t.magnitude_squared, r + t.rhs_squared));
-        any_contact = tasks.iter().any(|t| t.any_contact);
-    }
-    s.gas_dot_v = gas_dot_v;
-    if !any_contact {
-        s.contact.clear();
-    }
-
+    let fragments = s.gas_dot.len();
+    let chunks = n.div_ceil(CHUNK);
+    s.gas_partial.resize(chunks * fragments, 0.0);
+    s.sums.resize(chunks, fragments);
     // The coarse level: made once (again only if the substep length changes; after a topology
     // change it is extended, not remade, so a cracking step costs no factorization).
     if s.coarse_h != h {
@@ -1058,28 +1031,122 @@ pub(crate) fn substep(
         s.coarse_h = h;
     }
     let mut coarse = s.coarse.take();
-    let force_scale = h as f64 * magnitude_squared.sqrt();
-    let rhs_norm = rhs_squared.sqrt();
-    let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
-    let mut iterations = 0;
-    if r0 > 0.0 {
-        let input = SolveInput {
-            sys: &sys,
-            contact: &s.contact,
-            coupling: (&s.coupling, &s.neighbor),
-            rhs: &s.rhs,
-            inv_diag: &s.inv_diag,
-            any_contact,
-            fragments,
-            tolerance: r0.powi(2),
-            max_iterations,
+    let shared = Shared {
+        coupling: SharedSlice::new(&mut s.coupling),
+        neighbor: SharedSlice::new(&mut s.neighbor),
+        rhs: SharedSlice::new(&mut s.rhs),
+        inv_diag: SharedSlice::new(&mut s.inv_diag),
+        contact: SharedSlice::new(&mut s.contact),
+        terms: SharedSlice::new(&mut s.spring_terms),
+        dv: SharedSlice::new(&mut s.dv),
+        r: SharedSlice::new(&mut s.r),
+        z: SharedSlice::new(&mut s.z),
+        p: SharedSlice::new(&mut s.p),
+        ap: SharedSlice::new(&mut s.ap),
+        gas: SharedSlice::new(&mut s.gas_partial),
+        gas_v: SharedSlice::new(&mut s.sums.gas_v),
+        chunk_pap: SharedSlice::new(&mut s.sums.pap),
+        chunk_rr: SharedSlice::new(&mut s.sums.rr),
+        chunk_rz: SharedSlice::new(&mut s.sums.rz),
+        chunk_magnitude: SharedSlice::new(&mut s.sums.magnitude),
+        chunk_rhs: SharedSlice::new(&mut s.sums.rhs),
+        chunk_contact: SharedSlice::new(&mut s.sums.contact),
+        has_coarse: coarse.is_some(),
+        coarse: std::sync::RwLock::new(coarse.as_mut()),
+        coarse_rz: std::sync::atomic::AtomicU64::new(0),
+    };
+    let (force, previous_dv) = (&s.force, &s.previous_dv);
+    // Assembly and solve, one parallel region (see `Shared::solve`).
+    let (iterations, any_contact) = pool.team(|team| {
+        let mine = team.share(chunks);
+        let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
+        let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
+        // The spring terms (the member's share of the springs), and `Σ g·v` per chunk.
+        {
+            // SAFETY: this member's share of the terms, written by it alone.
+            let terms = unsafe { shared.terms.part(team.share(model.springs.len())) };
+            let first = team.share(model.springs.len()).start;
+            for (k, t) in terms.iter_mut().enumerate() {
+                *t = spring_terms(&sys, first + k);
+            }
+            if fragments > 0 {
+                for c in mine.clone() {
+                    // SAFETY: this chunk's sums, written by this member alone.
+                    let out = unsafe { shared.gas_v.part(gas_rows(c)) };
+                    gas_dots_range(&sys, rows(c), |i| Vec3A::from(sys.v[i]), out);
+                }
+            }
+        }
+        team.barrier();
+        let mut gas_dot_v = vec![0.0f64; fragments];
+        // SAFETY: nobody writes the sums or the terms in this pass.
+        let (gas_v, terms) = unsafe { (shared.gas_v.whole(), shared.terms.whole()) };
+        sum_gas_partial(gas_v, &mut gas_dot_v);
+        // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner (per
+        // vertex the springs are stiff along the surface and soft across it, which a diagonal
+        // (per axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can),
+        // then the start of the solve (warm start, contacts).
+        for c in mine.clone() {
+            let rows = rows(c);
+            let (first, end) = (rows.start, rows.end);
+            let adjacency = model.springs.offsets[first] as usize..model.springs.offsets[end] as usize;
+            let has_contact = !obstacles.is_empty();
+            // SAFETY: this member's chunks of every array the assembly writes.
+            let task = unsafe {
+                AssemblyTask {
+                    first,
+                    coupling: shared.coupling.part(adjacency.clone()),
+                    neighbor: shared.neighbor.part(adjacency),
+                    rhs: shared.rhs.part(rows.clone()),
+                    inv_diag: shared.inv_diag.part(rows.clone()),
+                    dv: shared.dv.part(rows.clone()),
+                    contact: if has_contact { shared.contact.part(rows) } else { &mut [] },
+                    gas: shared.gas.part(gas_rows(c)),
+                }
+            };
+            let (magnitude, rhs, contact) =
+                assemble_chunk(&sys, terms, force, previous_dv, &gas_dot_v, obstacles, task);
+            // SAFETY: this chunk's sums, written by this member alone.
+            unsafe {
+                shared.chunk_magnitude.part(c..c + 1)[0] = magnitude;
+                shared.chunk_rhs.part(c..c + 1)[0] = rhs;
+                shared.chunk_contact.part(c..c + 1)[0] = contact;
+            }
+        }
+        team.barrier();
+        // SAFETY: from here on nobody writes the sums of the assembly or what it made.
+        let (magnitude, rhs_sums, contacts) =
+            unsafe { (shared.chunk_magnitude.whole(), shared.chunk_rhs.whole(), shared.chunk_contact.whole()) };
+        let magnitude_squared: f64 = magnitude.iter().sum();
+        let rhs_squared: f64 = rhs_sums.iter().sum();
+        let any_contact = contacts.iter().any(|&c| c);
+        let force_scale = h as f64 * magnitude_squared.sqrt();
+        let rhs_norm = rhs_squared.sqrt();
+        let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
+        if r0 <= 0.0 {
+            return (0, any_contact);
+        }
+        // SAFETY: as above.
+        let input = unsafe {
+            SolveInput {
+                sys: &sys,
+                contact: if any_contact { shared.contact.whole() } else { &[] },
+                coupling: (shared.coupling.whole(), shared.neighbor.whole()),
+                rhs: shared.rhs.whole(),
+                inv_diag: shared.inv_diag.whole(),
+                any_contact,
+                fragments,
+                tolerance: r0.powi(2),
+                max_iterations,
+            }
         };
-        let vectors = SolveVectors { dv: &mut s.dv, r: &mut s.r, z: &mut s.z, p: &mut s.p, ap: &mut s.ap };
-        iterations = solve(pool, &input, vectors, &mut gas_partial, coarse.as_mut());
+        (shared.solve(team, &input), any_contact)
+    });
+    drop(shared);
+    if !any_contact {
+        s.contact.clear();
     }
     s.coarse = coarse;
-    s.gas_partial = gas_partial;
-    s.gas_dot = gas_dot;
     // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling term
     // of the matrix sums to zero); a truncated solve leaves a small error there, removed by a
     // uniform correction. Not with pins or contacts: their reactions are external forces.
