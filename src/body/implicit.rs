@@ -24,7 +24,7 @@ use glam::{Mat3A, Vec3, Vec3A, Vec4};
 use super::coarse::CoarseSpace;
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::Gas;
-use super::obstacles::{Obstacle, touching};
+use super::obstacles::{Obstacle, resolve, touching};
 use super::springs::{is_degenerate, spring_block_coefficients};
 use crate::parallel::{SharedSlice, Team, WorkerPool};
 
@@ -738,6 +738,8 @@ struct ChunkSums {
     rhs: Vec<f64>,
     contact: Vec<bool>,
     gas_v: Vec<f64>,
+    /// `Σ (rhs - m Δv)`, `Σ m` and whether no vertex is pinned.
+    momentum: Vec<(glam::DVec3, f64, bool)>,
 }
 
 impl ChunkSums {
@@ -750,6 +752,8 @@ impl ChunkSums {
         self.contact.resize(chunks, false);
         self.gas_v.clear();
         self.gas_v.resize(chunks * fragments, 0.0);
+        self.momentum.clear();
+        self.momentum.resize(chunks, (glam::DVec3::ZERO, 0.0, true));
     }
 
     fn memory_bytes(&self) -> usize {
@@ -761,6 +765,7 @@ impl ChunkSums {
             + self.gas_v.capacity())
             * 8
             + self.contact.capacity()
+            + self.momentum.capacity() * std::mem::size_of::<(glam::DVec3, f64, bool)>()
     }
 }
 
@@ -995,16 +1000,8 @@ pub(crate) fn substep(
         s.gas_dot.resize(frags, 0.0);
     }
     let no_gas: [u32; 0] = [];
-    let sys = System {
-        model,
-        x,
-        v,
-        h,
-        vertex_fragment: gas.as_deref().map_or(&no_gas[..], |g| &g.vertex_fragment),
-        gradient: &s.gradient,
-        gas_coef: &s.gas_coef,
-        gas_pressure: gas.as_deref().map_or(&[][..], |g| &g.pressure),
-    };
+    let vertex_fragment = gas.as_deref().map_or(&no_gas[..], |g| &g.vertex_fragment);
+    let gas_pressure = gas.as_deref().map_or(&[][..], |g| &g.pressure);
     // Each spring's terms once, then each vertex gathers its springs'.
     s.spring_terms.resize(model.springs.len(), SpringTerms::default());
     // The warm start: the previous substep's Δv (the velocity change varies slowly from step
@@ -1055,151 +1052,179 @@ pub(crate) fn substep(
         coarse: std::sync::RwLock::new(coarse.as_mut()),
         coarse_rz: std::sync::atomic::AtomicU64::new(0),
     };
-    let (force, previous_dv) = (&s.force, &s.previous_dv);
-    // Assembly and solve, one parallel region (see `Shared::solve`).
+    let force = &s.force;
+    let (gradient, gas_coef) = (&s.gradient, &s.gas_coef);
+    let (xs, vs, previous) = (SharedSlice::new(x), SharedSlice::new(v), SharedSlice::new(&mut s.previous_dv));
+    let momentum = SharedSlice::new(&mut s.sums.momentum);
+    // Assembly, solve and the update of x and v: one parallel region (see `Shared::solve`).
+    let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
     let (iterations, any_contact) = pool.team(|team| {
         let mine = team.share(chunks);
-        let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
-        let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
-        // The spring terms (the member's share of the springs), and `Σ g·v` per chunk.
-        {
-            // SAFETY: this member's share of the terms, written by it alone.
-            let terms = unsafe { shared.terms.part(team.share(model.springs.len())) };
-            let first = team.share(model.springs.len()).start;
-            for (k, t) in terms.iter_mut().enumerate() {
-                *t = spring_terms(&sys, first + k);
-            }
-            if fragments > 0 {
-                for c in mine.clone() {
-                    // SAFETY: this chunk's sums, written by this member alone.
-                    let out = unsafe { shared.gas_v.part(gas_rows(c)) };
-                    gas_dots_range(&sys, rows(c), |i| Vec3A::from(sys.v[i]), out);
-                }
-            }
-        }
-        team.barrier();
-        let mut gas_dot_v = vec![0.0f64; fragments];
-        // SAFETY: nobody writes the sums or the terms in this pass.
-        let (gas_v, terms) = unsafe { (shared.gas_v.whole(), shared.terms.whole()) };
-        sum_gas_partial(gas_v, &mut gas_dot_v);
-        // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner (per
-        // vertex the springs are stiff along the surface and soft across it, which a diagonal
-        // (per axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can),
-        // then the start of the solve (warm start, contacts).
-        for c in mine.clone() {
-            let rows = rows(c);
-            let (first, end) = (rows.start, rows.end);
-            let adjacency = model.springs.offsets[first] as usize..model.springs.offsets[end] as usize;
-            let has_contact = !obstacles.is_empty();
-            // SAFETY: this member's chunks of every array the assembly writes.
-            let task = unsafe {
-                AssemblyTask {
-                    first,
-                    coupling: shared.coupling.part(adjacency.clone()),
-                    neighbor: shared.neighbor.part(adjacency),
-                    rhs: shared.rhs.part(rows.clone()),
-                    inv_diag: shared.inv_diag.part(rows.clone()),
-                    dv: shared.dv.part(rows.clone()),
-                    contact: if has_contact { shared.contact.part(rows) } else { &mut [] },
-                    gas: shared.gas.part(gas_rows(c)),
-                }
+        let (iterations, any_contact) = {
+            // SAFETY: nobody writes x, v or the warm start until the last pass below, after a
+            // barrier and after the last use of these.
+            let sys = System {
+                model,
+                x: unsafe { xs.whole() },
+                v: unsafe { vs.whole() },
+                h,
+                vertex_fragment,
+                gradient,
+                gas_coef,
+                gas_pressure,
             };
-            let (magnitude, rhs, contact) =
-                assemble_chunk(&sys, terms, force, previous_dv, &gas_dot_v, obstacles, task);
-            // SAFETY: this chunk's sums, written by this member alone.
-            unsafe {
-                shared.chunk_magnitude.part(c..c + 1)[0] = magnitude;
-                shared.chunk_rhs.part(c..c + 1)[0] = rhs;
-                shared.chunk_contact.part(c..c + 1)[0] = contact;
+            let previous_dv = unsafe { previous.whole() };
+            let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
+            // The spring terms (the member's share of the springs), and `Σ g·v` per chunk.
+            {
+                // SAFETY: this member's share of the terms, written by it alone.
+                let terms = unsafe { shared.terms.part(team.share(model.springs.len())) };
+                let first = team.share(model.springs.len()).start;
+                for (k, t) in terms.iter_mut().enumerate() {
+                    *t = spring_terms(&sys, first + k);
+                }
+                if fragments > 0 {
+                    for c in mine.clone() {
+                        // SAFETY: this chunk's sums, written by this member alone.
+                        let out = unsafe { shared.gas_v.part(gas_rows(c)) };
+                        gas_dots_range(&sys, rows(c), |i| Vec3A::from(sys.v[i]), out);
+                    }
+                }
             }
-        }
-        team.barrier();
-        // SAFETY: from here on nobody writes the sums of the assembly or what it made.
-        let (magnitude, rhs_sums, contacts) =
-            unsafe { (shared.chunk_magnitude.whole(), shared.chunk_rhs.whole(), shared.chunk_contact.whole()) };
-        let magnitude_squared: f64 = magnitude.iter().sum();
-        let rhs_squared: f64 = rhs_sums.iter().sum();
-        let any_contact = contacts.iter().any(|&c| c);
-        let force_scale = h as f64 * magnitude_squared.sqrt();
-        let rhs_norm = rhs_squared.sqrt();
-        let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
-        if r0 <= 0.0 {
-            return (0, any_contact);
-        }
-        // SAFETY: as above.
-        let input = unsafe {
-            SolveInput {
-                sys: &sys,
-                contact: if any_contact { shared.contact.whole() } else { &[] },
-                coupling: (shared.coupling.whole(), shared.neighbor.whole()),
-                rhs: shared.rhs.whole(),
-                inv_diag: shared.inv_diag.whole(),
-                any_contact,
-                fragments,
-                tolerance: r0.powi(2),
-                max_iterations,
+            team.barrier();
+            let mut gas_dot_v = vec![0.0f64; fragments];
+            // SAFETY: nobody writes the sums or the terms in this pass.
+            let (gas_v, terms) = unsafe { (shared.gas_v.whole(), shared.terms.whole()) };
+            sum_gas_partial(gas_v, &mut gas_dot_v);
+            // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner (per
+            // vertex the springs are stiff along the surface and soft across it, which a diagonal
+            // (per axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can),
+            // then the start of the solve (warm start, contacts).
+            for c in mine.clone() {
+                let rows = rows(c);
+                let (first, end) = (rows.start, rows.end);
+                let adjacency = model.springs.offsets[first] as usize..model.springs.offsets[end] as usize;
+                let has_contact = !obstacles.is_empty();
+                // SAFETY: this member's chunks of every array the assembly writes.
+                let task = unsafe {
+                    AssemblyTask {
+                        first,
+                        coupling: shared.coupling.part(adjacency.clone()),
+                        neighbor: shared.neighbor.part(adjacency),
+                        rhs: shared.rhs.part(rows.clone()),
+                        inv_diag: shared.inv_diag.part(rows.clone()),
+                        dv: shared.dv.part(rows.clone()),
+                        contact: if has_contact { shared.contact.part(rows) } else { &mut [] },
+                        gas: shared.gas.part(gas_rows(c)),
+                    }
+                };
+                let (magnitude, rhs, contact) =
+                    assemble_chunk(&sys, terms, force, previous_dv, &gas_dot_v, obstacles, task);
+                // SAFETY: this chunk's sums, written by this member alone.
+                unsafe {
+                    shared.chunk_magnitude.part(c..c + 1)[0] = magnitude;
+                    shared.chunk_rhs.part(c..c + 1)[0] = rhs;
+                    shared.chunk_contact.part(c..c + 1)[0] = contact;
+                }
+            }
+            team.barrier();
+            // SAFETY: from here on nobody writes the sums of the assembly or what it made.
+            let (magnitude, rhs_sums, contacts) =
+                unsafe { (shared.chunk_magnitude.whole(), shared.chunk_rhs.whole(), shared.chunk_contact.whole()) };
+            let magnitude_squared: f64 = magnitude.iter().sum();
+            let rhs_squared: f64 = rhs_sums.iter().sum();
+            let any_contact = contacts.iter().any(|&c| c);
+            let force_scale = h as f64 * magnitude_squared.sqrt();
+            let rhs_norm = rhs_squared.sqrt();
+            let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
+            if r0 <= 0.0 {
+                (0, any_contact)
+            } else {
+                // SAFETY: as above.
+                let input = unsafe {
+                    SolveInput {
+                        sys: &sys,
+                        contact: if any_contact { shared.contact.whole() } else { &[] },
+                        coupling: (shared.coupling.whole(), shared.neighbor.whole()),
+                        rhs: shared.rhs.whole(),
+                        inv_diag: shared.inv_diag.whole(),
+                        any_contact,
+                        fragments,
+                        tolerance: r0.powi(2),
+                        max_iterations,
+                    }
+                };
+                (shared.solve(team, &input), any_contact)
             }
         };
-        (shared.solve(team, &input), any_contact)
+        // SAFETY: from here on each member reads and writes only the rows of its own chunks (Δv
+        // is no longer written by anyone, the contacts by nobody).
+        let (contact, dv) = unsafe { (if any_contact { shared.contact.whole() } else { &[][..] }, shared.dv.whole()) };
+        // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling
+        // term of the matrix sums to zero); a truncated solve leaves a small error there, removed
+        // by a uniform correction. Not with pins or contacts: their reactions are external
+        // forces.
+        let mut correction = Vec3A::ZERO;
+        if !any_contact {
+            // SAFETY: rhs is written by nobody; the chunk's sums by this member alone.
+            let rhs = unsafe { shared.rhs.whole() };
+            for c in mine.clone() {
+                let (mut error, mut mass, mut free) = (glam::DVec3::ZERO, 0.0f64, true);
+                for i in rows(c) {
+                    error += rhs[i].as_dvec3() - dv[i].as_dvec3() * model.mass[i] as f64;
+                    mass += model.mass[i] as f64;
+                    free &= model.inv_mass[i] > 0.0 || model.mass[i] == 0.0;
+                }
+                unsafe { momentum.part(c..c + 1)[0] = (error, mass, free) };
+            }
+            team.barrier();
+            // SAFETY: nobody writes the sums in this pass.
+            let sums = unsafe { momentum.whole() };
+            if sums.iter().all(|s| s.2) {
+                let (error, mass) = sums.iter().fold((glam::DVec3::ZERO, 0.0f64), |(e, m), s| (e + s.0, m + s.1));
+                if mass > 0.0 {
+                    correction = Vec3A::from((error / mass).as_vec3());
+                }
+            }
+        }
+        // v += Δv, friction, x += h v, then the contact response (SPEC 2.3) of each vertex.
+        let (restitution, friction) = (model.settings.restitution, model.settings.friction);
+        for c in mine {
+            let rows = rows(c);
+            let first = rows.start;
+            // SAFETY: this member's chunks.
+            let (x, v, previous) = unsafe { (xs.part(rows.clone()), vs.part(rows.clone()), previous.part(rows)) };
+            for k in 0..x.len() {
+                let i = first + k;
+                let dvi = dv[i] + correction;
+                previous[k] = dvi;
+                if model.inv_mass[i] == 0.0 {
+                    continue;
+                }
+                let v = &mut v[k];
+                *v += Vec3::from(dvi);
+                if let Some(&ContactFilter::Slide(normal, pushed)) = contact.get(i) {
+                    // SPEC 2.3 Coulomb friction on a sliding contact: the tangential speed drops
+                    // by at most `friction` times the normal speed change, never past zero.
+                    let tangential = *v - normal * v.dot(normal);
+                    let speed = tangential.length();
+                    if speed > 0.0 {
+                        *v -= tangential * ((model.settings.friction * pushed) / speed).min(1.0);
+                    }
+                }
+                x[k] += *v * h;
+                if !obstacles.is_empty() {
+                    resolve(&mut x[k], v, obstacles, restitution, friction);
+                }
+            }
+        }
+        (iterations, any_contact)
     });
     drop(shared);
     if !any_contact {
         s.contact.clear();
     }
     s.coarse = coarse;
-    // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling term
-    // of the matrix sums to zero); a truncated solve leaves a small error there, removed by a
-    // uniform correction. Not with pins or contacts: their reactions are external forces.
-    let mut correction = Vec3A::ZERO;
-    if !any_contact && model.inv_mass.iter().zip(model.mass).all(|(&w, &m)| w > 0.0 || m == 0.0) {
-        let (mut error, mut mass) = (glam::DVec3::ZERO, 0.0f64);
-        for i in 0..n {
-            error += s.rhs[i].as_dvec3() - s.dv[i].as_dvec3() * model.mass[i] as f64;
-            mass += model.mass[i] as f64;
-        }
-        if mass > 0.0 {
-            correction = Vec3A::from((error / mass).as_vec3());
-        }
-    }
-    // v += Δv, friction, x += h v, in parallel chunks.
-    struct FinalTask<'a> {
-        first: usize,
-        x: &'a mut [Vec3],
-        v: &'a mut [Vec3],
-        dv: &'a mut [Vec3A],
-        previous: &'a mut [Vec3A],
-    }
-    let mut tasks: Vec<FinalTask> = x
-        .chunks_mut(CHUNK)
-        .zip(v.chunks_mut(CHUNK))
-        .zip(s.dv.chunks_mut(CHUNK))
-        .zip(s.previous_dv.chunks_mut(CHUNK))
-        .enumerate()
-        .map(|(c, (((x, v), dv), previous))| FinalTask { first: c * CHUNK, x, v, dv, previous })
-        .collect();
-    let contact = &s.contact;
-    pool.for_each_task(&mut tasks, |t| {
-        for k in 0..t.x.len() {
-            let i = t.first + k;
-            t.dv[k] += correction;
-            t.previous[k] = t.dv[k];
-            if model.inv_mass[i] == 0.0 {
-                continue;
-            }
-            let v = &mut t.v[k];
-            *v += Vec3::from(t.dv[k]);
-            if let Some(&ContactFilter::Slide(normal, pushed)) = contact.get(i) {
-                // SPEC 2.3 Coulomb friction on a sliding contact: the tangential speed drops by at
-                // most `friction` times the normal speed change, never past zero.
-                let tangential = *v - normal * v.dot(normal);
-                let speed = tangential.length();
-                if speed > 0.0 {
-                    *v -= tangential * ((model.settings.friction * pushed) / speed).min(1.0);
-                }
-            }
-            t.x[k] += *v * h;
-        }
-    });
     (power * h as f64, iterations)
 }
 

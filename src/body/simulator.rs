@@ -567,8 +567,10 @@ impl Body {
             }
             Scratch::Xpbd(s) => (xpbd::substep(&model, gas, x, v, h, self.settings.iterations, &self.obstacles, s), 0),
         };
-        // XPBD handles contacts inside its iterations.
-        if !self.obstacles.is_empty() && self.settings.integrator != Integrator::Xpbd {
+        // XPBD handles contacts inside its iterations, implicit Euler in its last pass.
+        if !self.obstacles.is_empty()
+            && !matches!(self.settings.integrator, Integrator::Xpbd | Integrator::ImplicitEuler)
+        {
             let (restitution, friction) = (self.settings.restitution, self.settings.friction);
             // In parallel chunks (each vertex on its own): on the issue-5 balloon this serial loop
             // was about 1% of an implicit step, all of it on one thread.
