@@ -254,6 +254,12 @@ impl<'a, T> SharedSlice<'a, T> {
         self.len == 0
     }
 
+    /// The start of the slice, for code that hands disjoint rows of it to unsafe kernels of
+    /// its own (which then keep the contract of [`SharedSlice::part`] themselves).
+    pub fn as_mut_ptr(&self) -> *mut T {
+        self.ptr
+    }
+
     /// The elements `range`, to write.
     ///
     /// # Safety

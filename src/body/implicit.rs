@@ -21,7 +21,7 @@
 
 use glam::{Mat3A, Vec3, Vec3A, Vec4};
 
-use super::coarse::CoarseSpace;
+use super::coarse::{CoarseSpace, CoarseView};
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::Gas;
 use super::obstacles::{Obstacle, resolve, touching};
@@ -650,7 +650,7 @@ fn direction_chunk(
     first: usize,
     p: &mut [Vec3A],
     z: &[Vec3A],
-    coarse: Option<&CoarseSpace>,
+    coarse: Option<(&CoarseView, &[Vec3A])>,
     contact: &[ContactFilter],
     beta: f32,
     gas: &mut [f64],
@@ -663,10 +663,10 @@ fn direction_chunk(
     for k in 0..p.len() {
         let i = first + k;
         let mut zi = z[i];
-        if let Some(coarse) = coarse {
+        if let Some((coarse, solution)) = coarse {
             // The coarse correction, filtered like the rest of z.
             if sys.model.inv_mass[i] > 0.0 {
-                let c = coarse.correction(i);
+                let c = coarse.correction(i, solution);
                 zi += contact.get(i).map_or(c, |f| f.apply(c));
             }
         }
@@ -722,10 +722,13 @@ struct Shared<'a> {
     chunk_magnitude: SharedSlice<'a, f64>,
     chunk_rhs: SharedSlice<'a, f64>,
     chunk_contact: SharedSlice<'a, bool>,
-    coarse: std::sync::RwLock<Option<&'a mut CoarseSpace>>,
-    has_coarse: bool,
-    /// The coarse part of `r·z`, from member 0 (f64 bits).
-    coarse_rz: std::sync::atomic::AtomicU64,
+    /// The coarse level: what every member reads, the restricted residual and the solution (in
+    /// the factor's row order) and the parts of `r·z` of the two halves of the top dissection
+    /// and of its separator.
+    coarse: Option<CoarseView<'a>>,
+    coarse_rhs: SharedSlice<'a, Vec3A>,
+    coarse_solution: SharedSlice<'a, Vec3A>,
+    coarse_dots: SharedSlice<'a, f64>,
 }
 
 /// Per-chunk sums of the team passes.
@@ -740,6 +743,8 @@ struct ChunkSums {
     gas_v: Vec<f64>,
     /// `Σ (rhs - m Δv)`, `Σ m` and whether no vertex is pinned.
     momentum: Vec<(glam::DVec3, f64, bool)>,
+    /// The parts of the coarse `r·z`.
+    coarse_dots: Vec<f64>,
 }
 
 impl ChunkSums {
@@ -754,6 +759,7 @@ impl ChunkSums {
         self.gas_v.resize(chunks * fragments, 0.0);
         self.momentum.clear();
         self.momentum.resize(chunks, (glam::DVec3::ZERO, 0.0, true));
+        self.coarse_dots.resize(3, 0.0);
     }
 
     fn memory_bytes(&self) -> usize {
@@ -770,21 +776,95 @@ impl ChunkSums {
 }
 
 impl Shared<'_> {
-    /// Member 0 solves the coarse system for the current residual; all then add its part of r·z.
+    /// The coarse system for the current residual, solved together: members 0 and 1 restrict
+    /// the residual to the rows of one half of the top dissection each and solve them forward,
+    /// member 0 the separator both ways, then each its half backward (with one member, member 0
+    /// all of it in the same order: the same bits). Returns the coarse part of `r·z`, the same on
+    /// every member.
     fn coarse_part(&self, team: &Team) -> f64 {
-        if !self.has_coarse {
-            return 0.0;
-        }
-        if team.index() == 0 {
-            let mut guard = self.coarse.write().unwrap_or_else(|e| e.into_inner());
-            if let Some(c) = guard.as_mut() {
-                // SAFETY: nobody writes r in this pass.
-                let rz = c.solve_serial(unsafe { self.r.whole() });
-                self.coarse_rz.store(rz.to_bits(), std::sync::atomic::Ordering::Relaxed);
+        let Some(view) = &self.coarse else { return 0.0 };
+        let factor = view.factor;
+        let y = self.coarse_solution.as_mut_ptr();
+        // SAFETY: nobody writes r in this pass.
+        let r = unsafe { self.r.whole() };
+        // Restricts rows `rows` into the right side and the solution, forward solves `node`
+        // (its separator only when `separator_only`).
+        let start = |node: usize, separator_only: bool| {
+            let (subtree, separator) = factor.part_rows(node);
+            let rows = if separator_only { separator } else { subtree };
+            // SAFETY: the rows of this part are this member's alone in this pass (the halves go
+            // to different members, the separator to member 0 after a barrier).
+            let (rhs, solution) =
+                unsafe { (self.coarse_rhs.part(rows.clone()), self.coarse_solution.part(rows.clone())) };
+            view.restrict(rows, r, rhs);
+            solution.copy_from_slice(rhs);
+            // SAFETY: as above; the forward solve of a part reads only earlier rows of its own
+            // subtree.
+            unsafe { factor.forward_part(node, separator_only, y) };
+        };
+        // `rhs·solution` over the rows of a part (its separator only when `separator_only`).
+        let dot = |node: usize, separator_only: bool| -> f64 {
+            let (subtree, separator) = factor.part_rows(node);
+            let rows = if separator_only { separator } else { subtree };
+            // SAFETY: the rows of this part are this member's alone in this pass.
+            let (rhs, solution) = unsafe { (self.coarse_rhs.part(rows.clone()), self.coarse_solution.part(rows)) };
+            rhs.iter().zip(solution.iter()).map(|(a, b)| a.dot(*b) as f64).sum()
+        };
+        let root = factor.root();
+        match factor.top_halves() {
+            None => {
+                if team.index() == 0 {
+                    start(root, false);
+                    // SAFETY: member 0 alone touches the coarse vectors in this pass.
+                    unsafe { factor.backward_part(root, false, y) };
+                    // SAFETY: this member's slot.
+                    unsafe { self.coarse_dots.part(0..3).copy_from_slice(&[dot(root, false), 0.0, 0.0]) };
+                }
+                team.barrier();
+            }
+            Some((a, b)) => {
+                let owner_b = if team.size() > 1 { 1 } else { 0 };
+                let halves = [(a, 0usize, 0), (b, owner_b, 1usize)];
+                for &(node, owner, _) in &halves {
+                    if owner == team.index() {
+                        start(node, false);
+                    }
+                }
+                if team.index() == 0 {
+                    // The separator's right side (its rows are written by nobody else).
+                    let (_, separator) = factor.part_rows(root);
+                    // SAFETY: the separator rows are member 0's in this pass.
+                    let rhs = unsafe { self.coarse_rhs.part(separator.clone()) };
+                    view.restrict(separator.clone(), r, rhs);
+                    // SAFETY: as above.
+                    unsafe { self.coarse_solution.part(separator) }.copy_from_slice(rhs);
+                }
+                team.barrier();
+                if team.index() == 0 {
+                    // SAFETY: member 0 alone works in this pass; the halves were solved before it.
+                    unsafe {
+                        factor.forward_part(root, true, y);
+                        factor.backward_part(root, true, y);
+                        self.coarse_dots.part(2..3)[0] = dot(root, true);
+                    }
+                }
+                team.barrier();
+                for &(node, owner, slot) in &halves {
+                    if owner == team.index() {
+                        // SAFETY: the half's rows are this member's; the separator rows it reads
+                        // were finished before the barrier and nobody writes them now.
+                        unsafe {
+                            factor.backward_part(node, false, y);
+                            self.coarse_dots.part(slot..slot + 1)[0] = dot(node, false);
+                        }
+                    }
+                }
+                team.barrier();
             }
         }
-        team.barrier();
-        f64::from_bits(self.coarse_rz.load(std::sync::atomic::Ordering::Relaxed))
+        // SAFETY: nobody writes the slots in this pass.
+        let dots = unsafe { self.coarse_dots.whole() };
+        (dots[0] + dots[1]) + dots[2]
     }
 
     /// p = z + (coarse) + β p over the member's chunks, then everyone's Σ g·p.
@@ -793,7 +873,8 @@ impl Shared<'_> {
         let chunks = n.div_ceil(CHUNK);
         let fragments = input.fragments;
         {
-            let guard = self.coarse.read().unwrap_or_else(|e| e.into_inner());
+            // SAFETY: nobody writes the coarse solution in this pass.
+            let coarse = self.coarse.as_ref().map(|view| (view, unsafe { self.coarse_solution.whole() }));
             for c in team.share(chunks) {
                 let rows = c * CHUNK..((c + 1) * CHUNK).min(n);
                 // SAFETY: p and this chunk's gas sums are written by this member only; z is
@@ -803,7 +884,7 @@ impl Shared<'_> {
                 if beta == 0.0 {
                     p_rows.fill(Vec3A::ZERO);
                 }
-                direction_chunk(input.sys, c * CHUNK, p_rows, z_all, guard.as_deref(), input.contact, beta, gas_part);
+                direction_chunk(input.sys, c * CHUNK, p_rows, z_all, coarse, input.contact, beta, gas_part);
             }
         }
         team.barrier();
@@ -1028,6 +1109,13 @@ pub(crate) fn substep(
         s.coarse_h = h;
     }
     let mut coarse = s.coarse.take();
+    let (coarse_view, coarse_rhs, coarse_solution) = match coarse.as_mut() {
+        Some(c) => {
+            let (view, rhs, solution) = c.split();
+            (Some(view), rhs, solution)
+        }
+        None => (None, &mut [][..], &mut [][..]),
+    };
     let shared = Shared {
         coupling: SharedSlice::new(&mut s.coupling),
         neighbor: SharedSlice::new(&mut s.neighbor),
@@ -1048,9 +1136,10 @@ pub(crate) fn substep(
         chunk_magnitude: SharedSlice::new(&mut s.sums.magnitude),
         chunk_rhs: SharedSlice::new(&mut s.sums.rhs),
         chunk_contact: SharedSlice::new(&mut s.sums.contact),
-        has_coarse: coarse.is_some(),
-        coarse: std::sync::RwLock::new(coarse.as_mut()),
-        coarse_rz: std::sync::atomic::AtomicU64::new(0),
+        coarse: coarse_view,
+        coarse_rhs: SharedSlice::new(coarse_rhs),
+        coarse_solution: SharedSlice::new(coarse_solution),
+        coarse_dots: SharedSlice::new(&mut s.sums.coarse_dots),
     };
     let force = &s.force;
     let (gradient, gas_coef) = (&s.gradient, &s.gas_coef);
