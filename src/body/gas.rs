@@ -67,6 +67,9 @@ struct Corner {
 /// thread count).
 const VERTEX_CHUNK: usize = 2048;
 
+/// Faces per chunk of the parallel volume measurement (fixed, as above).
+pub(crate) const FACE_CHUNK: usize = 4096;
+
 /// A fragment with less than this fraction of its parent's volume is a shred and keeps no gas.
 pub(crate) const SHRED_FRACTION: f64 = 1e-3;
 
@@ -183,27 +186,48 @@ impl Gas {
     }
 
     /// [`Gas::measure`] in parallel fixed chunks of faces (the volumes differ in rounding only).
+    #[cfg(test)]
     pub fn measure_parallel(&mut self, pool: &WorkerPool, x: &[Vec3], triangles: &[[u32; 3]], face_fragment: &[u32]) {
-        const FACE_CHUNK: usize = 4096;
         let origin = self.origins(x);
         let fragments = self.fragment_count();
         let parts = pool.map_collect(triangles.len().div_ceil(FACE_CHUNK), |c| {
-            let range = c * FACE_CHUNK..((c + 1) * FACE_CHUNK).min(triangles.len());
             let mut six_v = vec![0.0f64; fragments];
-            for (t, &frag) in triangles[range.clone()].iter().zip(&face_fragment[range]) {
-                let o = origin[frag as usize];
-                six_v[frag as usize] +=
-                    tet(o, x[t[0] as usize].as_dvec3(), x[t[1] as usize].as_dvec3(), x[t[2] as usize].as_dvec3());
-            }
+            self.face_chunk_volumes(x, &origin, triangles, face_fragment, c, &mut six_v);
             six_v
         });
-        let mut six_v = vec![0.0f64; fragments];
-        for part in &parts {
+        self.finish_face_chunks(x, &origin, &parts);
+    }
+
+    /// Face chunk `c`'s part of 6 V per fragment into `six_v` (the parallel form of
+    /// [`Gas::measure`]: every chunk, in any order or at the same time, then
+    /// [`Gas::finish_face_chunks`]).
+    pub fn face_chunk_volumes(
+        &self,
+        x: &[Vec3],
+        origin: &[DVec3],
+        triangles: &[[u32; 3]],
+        face_fragment: &[u32],
+        c: usize,
+        six_v: &mut [f64],
+    ) {
+        let range = c * FACE_CHUNK..((c + 1) * FACE_CHUNK).min(triangles.len());
+        six_v.fill(0.0);
+        for (t, &frag) in triangles[range.clone()].iter().zip(&face_fragment[range]) {
+            let o = origin[frag as usize];
+            six_v[frag as usize] +=
+                tet(o, x[t[0] as usize].as_dvec3(), x[t[1] as usize].as_dvec3(), x[t[2] as usize].as_dvec3());
+        }
+    }
+
+    /// Volumes, hole areas and pressures from the face chunks' parts (in chunk order).
+    pub fn finish_face_chunks(&mut self, x: &[Vec3], origin: &[DVec3], parts: &[Vec<f64>]) {
+        let mut six_v = vec![0.0f64; self.fragment_count()];
+        for part in parts {
             for (total, value) in six_v.iter_mut().zip(part) {
                 *total += value;
             }
         }
-        self.finish(x, &origin, six_v);
+        self.finish(x, origin, six_v);
     }
 
     /// [`Gas::measure_with_gradient`] in parallel chunks of vertices: each vertex gathers the
@@ -325,7 +349,7 @@ impl Gas {
     }
 
     /// The origin of each fragment's volume sums: one of its vertices (accuracy only).
-    fn origins(&self, x: &[Vec3]) -> Vec<DVec3> {
+    pub fn origins(&self, x: &[Vec3]) -> Vec<DVec3> {
         self.reference_vertex
             .iter()
             .map(|&v| if v == u32::MAX { DVec3::ZERO } else { x[v as usize].as_dvec3() })
