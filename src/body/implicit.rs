@@ -745,6 +745,8 @@ struct ChunkSums {
     momentum: Vec<(glam::DVec3, f64, bool)>,
     /// The parts of the coarse `r·z`.
     coarse_dots: Vec<f64>,
+    /// Per chunk and fragment (at least one) the gas's 6 V.
+    gas_six_v: Vec<f64>,
 }
 
 impl ChunkSums {
@@ -760,6 +762,8 @@ impl ChunkSums {
         self.momentum.clear();
         self.momentum.resize(chunks, (glam::DVec3::ZERO, 0.0, true));
         self.coarse_dots.resize(3, 0.0);
+        self.gas_six_v.clear();
+        self.gas_six_v.resize(chunks * fragments.max(1), 0.0);
     }
 
     fn memory_bytes(&self) -> usize {
@@ -768,7 +772,8 @@ impl ChunkSums {
             + self.rz.capacity()
             + self.magnitude.capacity()
             + self.rhs.capacity()
-            + self.gas_v.capacity())
+            + self.gas_v.capacity()
+            + self.gas_six_v.capacity())
             * 8
             + self.contact.capacity()
             + self.momentum.capacity() * std::mem::size_of::<(glam::DVec3, f64, bool)>()
@@ -1065,24 +1070,30 @@ pub(crate) fn substep(
         0.0
     };
     let h2 = h * h;
+    // `h² P/V` per fragment (the gas rank-one term).
+    let gas_coefficients = |gas: &Gas, out: &mut [f64]| {
+        for (f, coef) in out.iter_mut().enumerate() {
+            let vol = gas.volume[f].max(gas.v_min[f]);
+            *coef = if gas.pressure[f] > 0.0 && vol > 0.0 { (h2 as f64) * gas.pressure[f] / vol } else { 0.0 };
+        }
+    };
+    // The gas gradient: without wind the first pass of the team region below (after
+    // `prepare_gradient` here), with wind here with the external forces.
+    let mut gas_origin = Vec::new();
+    let gradient_in_team = gas.is_some() && !wind;
     if let Some(gas) = gas.as_deref_mut() {
         s.gradient.resize(n, Vec3::ZERO);
-        if wind {
-            add_gas_forces_parallel(model, pool, gas, x, &mut s.gradient, &mut s.force);
-        } else {
-            gas.measure_with_gradient_parallel(pool, x, model.triangles, model.face_fragment, &mut s.gradient);
-        }
         let frags = gas.fragment_count();
         s.gas_coef.clear();
-        s.gas_coef.extend((0..frags).map(|f| {
-            let vol = gas.volume[f].max(gas.v_min[f]);
-            if gas.pressure[f] > 0.0 && vol > 0.0 { (h2 as f64) * gas.pressure[f] / vol } else { 0.0 }
-        }));
+        s.gas_coef.resize(frags, 0.0);
+        if wind {
+            add_gas_forces_parallel(model, pool, gas, x, &mut s.gradient, &mut s.force);
+            gas_coefficients(gas, &mut s.gas_coef);
+        } else {
+            gas_origin = gas.prepare_gradient(x, model.triangles, model.face_fragment, n);
+        }
         s.gas_dot.resize(frags, 0.0);
     }
-    let no_gas: [u32; 0] = [];
-    let vertex_fragment = gas.as_deref().map_or(&no_gas[..], |g| &g.vertex_fragment);
-    let gas_pressure = gas.as_deref().map_or(&[][..], |g| &g.pressure);
     // Each spring's terms once, then each vertex gathers its springs'.
     s.spring_terms.resize(model.springs.len(), SpringTerms::default());
     // The warm start: the previous substep's Δv (the velocity change varies slowly from step
@@ -1142,25 +1153,59 @@ pub(crate) fn substep(
         coarse_dots: SharedSlice::new(&mut s.sums.coarse_dots),
     };
     let force = &s.force;
-    let (gradient, gas_coef) = (&s.gradient, &s.gas_coef);
+    let (gradient, gas_coef) = (SharedSlice::new(&mut s.gradient), SharedSlice::new(&mut s.gas_coef));
     let (xs, vs, previous) = (SharedSlice::new(x), SharedSlice::new(v), SharedSlice::new(&mut s.previous_dv));
     let momentum = SharedSlice::new(&mut s.sums.momentum);
-    // Assembly, solve and the update of x and v: one parallel region (see `Shared::solve`).
+    let gas_six_v = SharedSlice::new(&mut s.sums.gas_six_v);
+    let gas_lock = std::sync::RwLock::new(gas);
+    // Gas gradient, assembly, solve and the update of x and v: one parallel region (see
+    // `Shared::solve`).
     let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
     let (iterations, any_contact) = pool.team(|team| {
         let mine = team.share(chunks);
+        if gradient_in_team {
+            let fragments = fragments.max(1);
+            {
+                let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+                if let Some(gas) = guard.as_deref() {
+                    for c in mine.clone() {
+                        // SAFETY: this member's chunks of the gradient and of the sums; x is
+                        // written by nobody.
+                        let (out, six_v, x) = unsafe {
+                            (gradient.part(rows(c)), gas_six_v.part(c * fragments..(c + 1) * fragments), xs.whole())
+                        };
+                        gas.gradient_rows(x, &gas_origin, c * CHUNK, out, six_v);
+                    }
+                }
+            }
+            team.barrier();
+            if team.index() == 0 {
+                let mut guard = gas_lock.write().unwrap_or_else(|e| e.into_inner());
+                if let Some(gas) = guard.as_deref_mut() {
+                    // SAFETY: member 0 alone works in this pass.
+                    unsafe {
+                        gas.finish_gradient(xs.whole(), &gas_origin, gas_six_v.whole(), gradient.part(0..n));
+                        gas_coefficients(gas, gas_coef.part(0..gas_coef.len()));
+                    }
+                }
+            }
+            team.barrier();
+        }
+        let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+        let gas = gas_guard.as_deref();
         let (iterations, any_contact) = {
             // SAFETY: nobody writes x, v or the warm start until the last pass below, after a
-            // barrier and after the last use of these.
+            // barrier and after the last use of these; nobody writes the gradient and the gas
+            // coefficients from here on.
             let sys = System {
                 model,
                 x: unsafe { xs.whole() },
                 v: unsafe { vs.whole() },
                 h,
-                vertex_fragment,
-                gradient,
-                gas_coef,
-                gas_pressure,
+                vertex_fragment: gas.map_or(&[][..], |g| &g.vertex_fragment),
+                gradient: unsafe { gradient.whole() },
+                gas_coef: unsafe { gas_coef.whole() },
+                gas_pressure: gas.map_or(&[][..], |g| &g.pressure),
             };
             let previous_dv = unsafe { previous.whole() };
             let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
