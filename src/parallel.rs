@@ -8,7 +8,7 @@
 
 use std::marker::PhantomData;
 use std::ops::Range;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 
 use crate::error::{Error, Result};
 
@@ -126,7 +126,7 @@ impl WorkerPool {
         if let Some(pool) = &self.pool {
             let sync = TeamSync::new(self.threads);
             let run = |index: usize| {
-                let member = Team { index, size: self.threads, sync: &sync };
+                let member = Team { index, size: self.threads, sync: &sync, passes: std::cell::Cell::new(0) };
                 match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&member))) {
                     Ok(result) => result,
                     Err(panic) => {
@@ -139,7 +139,7 @@ impl WorkerPool {
             return results.swap_remove(0);
         }
         let sync = TeamSync::new(1);
-        f(&Team { index: 0, size: 1, sync: &sync })
+        f(&Team { index: 0, size: 1, sync: &sync, passes: std::cell::Cell::new(0) })
     }
 
     /// Heap bytes attributed to the pool (its threads' stacks are not counted).
@@ -152,17 +152,30 @@ impl WorkerPool {
     }
 }
 
-/// The meeting point of a team: a sense-reversing barrier (a counter and a generation).
+/// The meeting point of a team: a sense-reversing barrier (a counter and a generation), and
+/// per member the next unclaimed item of its share in the current pass ([`Team::claim`]).
 struct TeamSync {
     size: usize,
-    arrived: AtomicUsize,
-    generation: AtomicUsize,
+    arrived: Padded<AtomicUsize>,
+    generation: Padded<AtomicUsize>,
     poisoned: AtomicBool,
+    /// Per member: `pass << 32 | next item`.
+    claims: Vec<Padded<AtomicU64>>,
 }
+
+/// A value alone on its cache lines (members spinning on one do not slow the others' writes).
+#[repr(align(128))]
+struct Padded<T>(T);
 
 impl TeamSync {
     fn new(size: usize) -> Self {
-        Self { size, arrived: AtomicUsize::new(0), generation: AtomicUsize::new(0), poisoned: AtomicBool::new(false) }
+        Self {
+            size,
+            arrived: Padded(AtomicUsize::new(0)),
+            generation: Padded(AtomicUsize::new(0)),
+            poisoned: AtomicBool::new(false),
+            claims: (0..size).map(|_| Padded(AtomicU64::new(0))).collect(),
+        }
     }
 }
 
@@ -176,6 +189,8 @@ pub struct Team<'a> {
     index: usize,
     size: usize,
     sync: &'a TeamSync,
+    /// Passes of [`Team::claim`] so far (the same on every member).
+    passes: std::cell::Cell<u32>,
 }
 
 impl Team<'_> {
@@ -192,7 +207,42 @@ impl Team<'_> {
     /// This member's share of `count` items (chunks): consecutive blocks in member order, fixed
     /// for a given team size, so each member keeps the same data in its cache from pass to pass.
     pub fn share(&self, count: usize) -> Range<usize> {
-        (self.index * count / self.size)..((self.index + 1) * count / self.size)
+        Self::share_of(self.index, self.size, count)
+    }
+
+    fn share_of(member: usize, size: usize, count: usize) -> Range<usize> {
+        (member * count / size)..((member + 1) * count / size)
+    }
+
+    /// Calls `f(item)` for the items `0..count` (chunks) this member claims in this pass: the
+    /// items of its own share first ([`Team::share`], in order), then, once those are gone, the
+    /// items left in the other members' shares. Every item is claimed by exactly one member, so
+    /// a member slowed down (a busy core) leaves its work to the others instead of making them
+    /// wait at the next barrier, while on an idle machine each member keeps its own share.
+    ///
+    /// Every member must call this the same number of times, and a barrier must separate two
+    /// calls (a pass that claims from a member's share must be over everywhere before the next
+    /// pass starts claiming from it).
+    pub fn claim(&self, count: usize, mut f: impl FnMut(usize)) {
+        let pass = self.passes.get().wrapping_add(1);
+        self.passes.set(pass);
+        for k in 0..self.size {
+            let member = (self.index + k) % self.size;
+            let range = Self::share_of(member, self.size, count);
+            let counter = &self.sync.claims[member].0;
+            loop {
+                let current = counter.load(Ordering::Acquire);
+                // A counter last used in an earlier pass starts at the share's first item.
+                let next = if (current >> 32) as u32 == pass { current as u32 as usize } else { range.start };
+                if next >= range.end {
+                    break;
+                }
+                let claimed = (pass as u64) << 32 | (next + 1) as u64;
+                if counter.compare_exchange_weak(current, claimed, Ordering::AcqRel, Ordering::Acquire).is_ok() {
+                    f(next);
+                }
+            }
+        }
     }
 
     /// Waits until every member has arrived here. Writes made before the barrier by any member
@@ -204,14 +254,14 @@ impl Team<'_> {
         if sync.size == 1 {
             return;
         }
-        let generation = sync.generation.load(Ordering::Acquire);
-        if sync.arrived.fetch_add(1, Ordering::AcqRel) + 1 == sync.size {
-            sync.arrived.store(0, Ordering::Relaxed);
-            sync.generation.store(generation.wrapping_add(1), Ordering::Release);
+        let generation = sync.generation.0.load(Ordering::Acquire);
+        if sync.arrived.0.fetch_add(1, Ordering::AcqRel) + 1 == sync.size {
+            sync.arrived.0.store(0, Ordering::Relaxed);
+            sync.generation.0.store(generation.wrapping_add(1), Ordering::Release);
             return;
         }
         let mut spins = 0u32;
-        while sync.generation.load(Ordering::Acquire) == generation {
+        while sync.generation.0.load(Ordering::Acquire) == generation {
             if sync.poisoned.load(Ordering::Relaxed) {
                 panic!("another member of the worker team panicked");
             }
@@ -333,8 +383,10 @@ mod tests {
             let total = pool.team(|team| {
                 let mut total = 0.0f64;
                 for round in 0..200 {
-                    for c in team.share(chunks) {
-                        // SAFETY: chunk c belongs to this member alone in this pass.
+                    let mut claimed = Vec::new();
+                    team.claim(chunks, |c| claimed.push(c));
+                    for c in claimed {
+                        // SAFETY: chunk c was claimed by this member alone in this pass.
                         let part = unsafe { shared.part(c * 100..(c + 1) * 100) };
                         let mut sum = 0.0f64;
                         for x in part.iter_mut() {

@@ -174,6 +174,9 @@ const CG_FORCE_TOLERANCE: f64 = 1e-4;
 /// Vertices per parallel chunk (fixed, so the result does not depend on the thread count).
 const CHUNK: usize = 1024;
 
+/// Springs per chunk of the spring pass (any split gives the same result: no sums).
+const SPRING_CHUNK: usize = 2048;
+
 /// `a bᵀ`.
 fn outer(a: Vec3A, b: Vec3A) -> Mat3A {
     Mat3A::from_cols(a * b.x, a * b.y, a * b.z)
@@ -696,8 +699,9 @@ struct SolveInput<'a> {
 
 /// The vectors and sums that the members of a team share during the assembly and the solve.
 /// SAFETY (of every `whole` and `part` on them): in each pass (between two barriers) a member
-/// writes only the rows of its own chunks (`Team::share` of the chunks) of the arrays the pass
-/// updates, and reads rows of other chunks only of arrays that no member writes in that pass.
+/// writes only the rows of the chunks it claimed in that pass ([`Team::claim`]: each chunk goes
+/// to exactly one member) of the arrays the pass updates, and reads rows of other chunks only of
+/// arrays that no member writes in that pass.
 struct Shared<'a> {
     coupling: SharedSlice<'a, Coupling>,
     neighbor: SharedSlice<'a, u32>,
@@ -880,7 +884,7 @@ impl Shared<'_> {
         {
             // SAFETY: nobody writes the coarse solution in this pass.
             let coarse = self.coarse.as_ref().map(|view| (view, unsafe { self.coarse_solution.whole() }));
-            for c in team.share(chunks) {
+            team.claim(chunks, |c| {
                 let rows = c * CHUNK..((c + 1) * CHUNK).min(n);
                 // SAFETY: p and this chunk's gas sums are written by this member only; z is
                 // written by nobody in this pass.
@@ -890,7 +894,7 @@ impl Shared<'_> {
                     p_rows.fill(Vec3A::ZERO);
                 }
                 direction_chunk(input.sys, c * CHUNK, p_rows, z_all, coarse, input.contact, beta, gas_part);
-            }
+            });
         }
         team.barrier();
         // SAFETY: nobody writes the gas sums in this pass.
@@ -901,10 +905,18 @@ impl Shared<'_> {
     /// from the start in `dv`, whose `Σ g·Δv` per fragment and chunk is in `gas`; returns the
     /// iterations. Run by every member of the team.
     ///
-    /// Each member owns a fixed block of chunks of rows, the passes over them are separated by
-    /// barriers, and every reduction adds the chunks' partial sums in chunk order (each member
-    /// adds all of them itself, so all take the same decisions). The coarse solve runs on
-    /// member 0 while the others wait.
+    /// Each member claims chunks of rows, its own block first ([`Team::claim`]), the passes over
+    /// them are separated by barriers, and every reduction adds the chunks' partial sums in chunk
+    /// order (each member adds all of them itself, so all take the same decisions), so the bits
+    /// never depend on who did which chunk. The coarse solve is split between members 0 and 1
+    /// ([`Shared::coarse_part`]).
+    ///
+    /// On the issue-5 balloon (benches/body_balloon.rs, 2 threads, alternating runs on a quiet
+    /// machine) this region (with the gas gradient, the assembly and the last update in it, one
+    /// fork per substep) took a step from 2.35-2.77 ms (10th percentile 1.48-1.67) with a fork
+    /// and join per pass (four per iteration) to 2.03-2.07 ms (1.25-1.32); claiming instead of
+    /// fixed blocks alone: 2.18-2.34 ms to 2.03-2.07 ms (the two cores of the test machine do not
+    /// run equally fast).
     fn solve(&self, team: &Team, input: &SolveInput) -> usize {
         let SolveInput { sys, contact, coupling, rhs, inv_diag, any_contact, fragments, tolerance, max_iterations } =
             *input;
@@ -913,13 +925,12 @@ impl Shared<'_> {
         let chunks = n.div_ceil(CHUNK);
         let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
         {
-            let mine = team.share(chunks);
             let mut gas_dot = vec![0.0f64; fragments];
             // SAFETY: nobody writes the gas sums (made by the assembly) in this pass.
             sum_gas_partial(unsafe { gas.whole() }, &mut gas_dot);
             // r = rhs - A Δv, z = M⁻¹ r: a member's rows of r need only its own rows of A Δv, so
             // no barrier between the two.
-            for c in mine.clone() {
+            team.claim(chunks, |c| {
                 // SAFETY: this member's chunks of ap, r, z and of the sums; Δv is written by nobody.
                 let (out, r_rows, z_rows, sum, dv_all) = unsafe {
                     (ap.part(rows(c)), r.part(rows(c)), z.part(rows(c)), chunk_rz.part(c..c + 1), dv.whole())
@@ -927,7 +938,7 @@ impl Shared<'_> {
                 let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
                 product_rows(sys, contact, coupling, dv_all, &gas_dot, &mut task);
                 sum[0] = initial_chunk(c * CHUNK, (r_rows, z_rows), rhs, task.out, inv_diag, contact, any_contact);
-            }
+            });
             team.barrier();
             // SAFETY: nobody writes the chunks' sums in this pass.
             let mut rz: f64 = unsafe { chunk_rz.whole() }.iter().sum();
@@ -936,13 +947,13 @@ impl Shared<'_> {
             let mut iterations = 0;
             while iterations < max_iterations {
                 iterations += 1;
-                for c in mine.clone() {
+                team.claim(chunks, |c| {
                     // SAFETY: this member's chunks of ap and of the sums; p is written by nobody.
                     let (out, sum, p_all) = unsafe { (ap.part(rows(c)), chunk_pap.part(c..c + 1), p.whole()) };
                     let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
                     product_rows(sys, contact, coupling, p_all, &gas_dot, &mut task);
                     sum[0] = task.dot;
-                }
+                });
                 team.barrier();
                 // SAFETY: nobody writes the chunks' sums in this pass.
                 let pap: f64 = unsafe { chunk_pap.whole() }.iter().sum();
@@ -951,7 +962,7 @@ impl Shared<'_> {
                 }
                 let alpha = (rz / pap) as f32;
                 // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass.
-                for c in mine.clone() {
+                team.claim(chunks, |c| {
                     // SAFETY: this member's chunks of Δv, r, z, ap and of the sums; p is written by
                     // nobody.
                     let (dv_rows, r_rows, z_rows, ap_rows, rr, rz, p_all) = unsafe {
@@ -975,7 +986,7 @@ impl Shared<'_> {
                         alpha,
                         any_contact,
                     );
-                }
+                });
                 team.barrier();
                 // SAFETY: nobody writes the chunks' sums in this pass.
                 let (rr, rz_next) = unsafe { (chunk_rr.whole(), chunk_rz.whole()) };
@@ -1162,20 +1173,19 @@ pub(crate) fn substep(
     // `Shared::solve`).
     let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
     let (iterations, any_contact) = pool.team(|team| {
-        let mine = team.share(chunks);
         if gradient_in_team {
             let fragments = fragments.max(1);
             {
                 let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
                 if let Some(gas) = guard.as_deref() {
-                    for c in mine.clone() {
+                    team.claim(chunks, |c| {
                         // SAFETY: this member's chunks of the gradient and of the sums; x is
                         // written by nobody.
                         let (out, six_v, x) = unsafe {
                             (gradient.part(rows(c)), gas_six_v.part(c * fragments..(c + 1) * fragments), xs.whole())
                         };
                         gas.gradient_rows(x, &gas_origin, c * CHUNK, out, six_v);
-                    }
+                    });
                 }
             }
             team.barrier();
@@ -1209,22 +1219,25 @@ pub(crate) fn substep(
             };
             let previous_dv = unsafe { previous.whole() };
             let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
-            // The spring terms (the member's share of the springs), and `Σ g·v` per chunk.
-            {
-                // SAFETY: this member's share of the terms, written by it alone.
-                let terms = unsafe { shared.terms.part(team.share(model.springs.len())) };
-                let first = team.share(model.springs.len()).start;
-                for (k, t) in terms.iter_mut().enumerate() {
-                    *t = spring_terms(&sys, first + k);
-                }
-                if fragments > 0 {
-                    for c in mine.clone() {
-                        // SAFETY: this chunk's sums, written by this member alone.
-                        let out = unsafe { shared.gas_v.part(gas_rows(c)) };
-                        gas_dots_range(&sys, rows(c), |i| Vec3A::from(sys.v[i]), out);
+            // The spring terms (chunks of springs), and `Σ g·v` per chunk of vertices, in one pass.
+            let spring_chunks = model.springs.len().div_ceil(SPRING_CHUNK);
+            let gas_chunks = if fragments > 0 { chunks } else { 0 };
+            team.claim(spring_chunks + gas_chunks, |c| {
+                if c < spring_chunks {
+                    let range = c * SPRING_CHUNK..((c + 1) * SPRING_CHUNK).min(model.springs.len());
+                    let first = range.start;
+                    // SAFETY: this chunk of the terms, written by this member alone.
+                    let terms = unsafe { shared.terms.part(range) };
+                    for (k, t) in terms.iter_mut().enumerate() {
+                        *t = spring_terms(&sys, first + k);
                     }
+                } else {
+                    let c = c - spring_chunks;
+                    // SAFETY: this chunk's sums, written by this member alone.
+                    let out = unsafe { shared.gas_v.part(gas_rows(c)) };
+                    gas_dots_range(&sys, rows(c), |i| Vec3A::from(sys.v[i]), out);
                 }
-            }
+            });
             team.barrier();
             let mut gas_dot_v = vec![0.0f64; fragments];
             // SAFETY: nobody writes the sums or the terms in this pass.
@@ -1234,7 +1247,7 @@ pub(crate) fn substep(
             // vertex the springs are stiff along the surface and soft across it, which a diagonal
             // (per axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can),
             // then the start of the solve (warm start, contacts).
-            for c in mine.clone() {
+            team.claim(chunks, |c| {
                 let rows = rows(c);
                 let (first, end) = (rows.start, rows.end);
                 let adjacency = model.springs.offsets[first] as usize..model.springs.offsets[end] as usize;
@@ -1260,7 +1273,7 @@ pub(crate) fn substep(
                     shared.chunk_rhs.part(c..c + 1)[0] = rhs;
                     shared.chunk_contact.part(c..c + 1)[0] = contact;
                 }
-            }
+            });
             team.barrier();
             // SAFETY: from here on nobody writes the sums of the assembly or what it made.
             let (magnitude, rhs_sums, contacts) =
@@ -1302,7 +1315,7 @@ pub(crate) fn substep(
         if !any_contact {
             // SAFETY: rhs is written by nobody; the chunk's sums by this member alone.
             let rhs = unsafe { shared.rhs.whole() };
-            for c in mine.clone() {
+            team.claim(chunks, |c| {
                 let (mut error, mut mass, mut free) = (glam::DVec3::ZERO, 0.0f64, true);
                 for i in rows(c) {
                     error += rhs[i].as_dvec3() - dv[i].as_dvec3() * model.mass[i] as f64;
@@ -1310,7 +1323,7 @@ pub(crate) fn substep(
                     free &= model.inv_mass[i] > 0.0 || model.mass[i] == 0.0;
                 }
                 unsafe { momentum.part(c..c + 1)[0] = (error, mass, free) };
-            }
+            });
             team.barrier();
             // SAFETY: nobody writes the sums in this pass.
             let sums = unsafe { momentum.whole() };
@@ -1323,7 +1336,7 @@ pub(crate) fn substep(
         }
         // v += Δv, friction, x += h v, then the contact response (SPEC 2.3) of each vertex.
         let (restitution, friction) = (model.settings.restitution, model.settings.friction);
-        for c in mine {
+        team.claim(chunks, |c| {
             let rows = rows(c);
             let first = rows.start;
             // SAFETY: this member's chunks.
@@ -1351,7 +1364,7 @@ pub(crate) fn substep(
                     resolve(&mut x[k], v, obstacles, restitution, friction);
                 }
             }
-        }
+        });
         (iterations, any_contact)
     });
     drop(shared);
