@@ -1367,7 +1367,6 @@ pub(crate) fn substep(
         });
         (iterations, any_contact)
     });
-    drop(shared);
     if !any_contact {
         s.contact.clear();
     }
