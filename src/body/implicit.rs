@@ -430,7 +430,8 @@ struct ProductTask<'a> {
 }
 
 /// Rows `first..` of `A input` for the system matrix `M - h² K - h D` (pinned rows zero, contact
-/// constraints filtered out when `contact` is not empty); `gas_dot` holds `Σ g·input` per fragment.
+/// constraints filtered out when `contact` is not empty); `gas_scale` holds `h² P/V Σ g·input` per
+/// fragment ([`gas_scale`]).
 ///
 /// The couplings of each row are summed by [`row_sum`], or by [`row_sum_avx2`] two at a time
 /// when the processor has AVX2 and FMA (checked at run time: the library is built for baseline
@@ -441,16 +442,16 @@ fn product_rows(
     contact: &[ContactFilter],
     (coupling, neighbor): (&[Coupling], &[u32]),
     input: &[Vec3A],
-    gas_dot: &[f64],
+    gas_scale: &[f32],
     task: &mut ProductTask,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: the processor has the features the function is compiled for (checked above).
-        unsafe { product_rows_avx2(sys, contact, (coupling, neighbor), input, gas_dot, task) };
+        unsafe { product_rows_avx2(sys, contact, (coupling, neighbor), input, gas_scale, task) };
         return;
     }
-    product_rows_with(sys, contact, (coupling, neighbor), input, gas_dot, task, row_sum);
+    product_rows_with(sys, contact, (coupling, neighbor), input, gas_scale, task, row_sum);
 }
 
 /// [`product_rows`] compiled for AVX2 and FMA.
@@ -464,10 +465,10 @@ unsafe fn product_rows_avx2(
     contact: &[ContactFilter],
     coupling: (&[Coupling], &[u32]),
     input: &[Vec3A],
-    gas_dot: &[f64],
+    gas_scale: &[f32],
     task: &mut ProductTask,
 ) {
-    product_rows_with(sys, contact, coupling, input, gas_dot, task, |c, n, input, xi| {
+    product_rows_with(sys, contact, coupling, input, gas_scale, task, |c, n, input, xi| {
         // SAFETY: this function runs only where AVX2 and FMA are available.
         unsafe { row_sum_avx2(c, n, input, xi) }
     });
@@ -480,7 +481,7 @@ fn product_rows_with(
     contact: &[ContactFilter],
     (coupling, neighbor): (&[Coupling], &[u32]),
     input: &[Vec3A],
-    gas_dot: &[f64],
+    gas_scale: &[f32],
     task: &mut ProductTask,
     sum: impl Fn(&[Coupling], &[u32], &[Vec3A], Vec3A) -> Vec3A,
 ) {
@@ -497,7 +498,7 @@ fn product_rows_with(
         let (start, end) = (offsets[i] as usize, offsets[i + 1] as usize);
         let mut acc = xi * model.mass[i] + sum(&coupling[start..end], &neighbor[start..end], input, xi);
         if let Some(frag) = sys.fragment(i) {
-            acc += Vec3A::from(sys.gradient[i]) * (sys.gas_coef[frag] * gas_dot[frag]) as f32;
+            acc += Vec3A::from(sys.gradient[i]) * gas_scale[frag];
         }
         if let Some(filter) = contact.get(i) {
             acc = filter.apply(acc);
@@ -928,6 +929,7 @@ impl Shared<'_> {
             let mut gas_dot = vec![0.0f64; fragments];
             // SAFETY: nobody writes the gas sums (made by the assembly) in this pass.
             sum_gas_partial(unsafe { gas.whole() }, &mut gas_dot);
+            let scale = gas_scale(sys, &gas_dot);
             // r = rhs - A Δv, z = M⁻¹ r: a member's rows of r need only its own rows of A Δv, so
             // no barrier between the two.
             team.claim(chunks, |c| {
@@ -936,7 +938,7 @@ impl Shared<'_> {
                     (ap.part(rows(c)), r.part(rows(c)), z.part(rows(c)), chunk_rz.part(c..c + 1), dv.whole())
                 };
                 let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
-                product_rows(sys, contact, coupling, dv_all, &gas_dot, &mut task);
+                product_rows(sys, contact, coupling, dv_all, &scale, &mut task);
                 sum[0] = initial_chunk(c * CHUNK, (r_rows, z_rows), rhs, task.out, inv_diag, contact, any_contact);
             });
             team.barrier();
@@ -947,11 +949,12 @@ impl Shared<'_> {
             let mut iterations = 0;
             while iterations < max_iterations {
                 iterations += 1;
+                let scale = gas_scale(sys, &gas_dot);
                 team.claim(chunks, |c| {
                     // SAFETY: this member's chunks of ap and of the sums; p is written by nobody.
                     let (out, sum, p_all) = unsafe { (ap.part(rows(c)), chunk_pap.part(c..c + 1), p.whole()) };
                     let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
-                    product_rows(sys, contact, coupling, p_all, &gas_dot, &mut task);
+                    product_rows(sys, contact, coupling, p_all, &scale, &mut task);
                     sum[0] = task.dot;
                 });
                 team.barrier();
@@ -1035,6 +1038,12 @@ impl GasRun {
         }
         self.sum = 0.0;
     }
+}
+
+/// `h² P/V Σ g·p` per fragment (as f32, the factor of the gas term of each row of a product)
+/// from `Σ g·p` per fragment: once per product, not once per row.
+fn gas_scale(sys: &System, gas_dot: &[f64]) -> Vec<f32> {
+    sys.gas_coef.iter().zip(gas_dot).map(|(&coef, &dot)| (coef * dot) as f32).collect()
 }
 
 /// `Σ g·p` per fragment from the chunks' parts (in chunk order).
