@@ -5,6 +5,13 @@
 //! split in fixed chunks that do not depend on the thread count, and every reduction runs in a
 //! fixed order, so results are bit-identical whatever `threads` is. Without the `parallel`
 //! feature every pool is serial.
+//!
+//! A loop of many short passes (the iterations of a solver) runs as one parallel region on a
+//! [`Team`] of the pool's threads ([`WorkerPool::team`]): the members claim fixed chunks
+//! ([`Team::claim`]), meet at spin barriers ([`Team::barrier`]) and share the arrays of the
+//! passes through [`SharedSlice`] (each member writes only the chunks it claimed in a pass), so a
+//! pass costs a barrier (well under a microsecond on idle cores) instead of a fork and join
+//! (tens of microseconds when a worker has to be woken).
 
 use std::marker::PhantomData;
 use std::ops::Range;
