@@ -5,6 +5,17 @@
 //! split in fixed chunks that do not depend on the thread count, and every reduction runs in a
 //! fixed order, so results are bit-identical whatever `threads` is. Without the `parallel`
 //! feature every pool is serial.
+//!
+//! A loop of many short passes (the iterations of a solver) runs as one parallel region on a
+//! [`Team`] of the pool's threads ([`WorkerPool::team`]): the members claim fixed chunks
+//! ([`Team::claim`]), meet at spin barriers ([`Team::barrier`]) and share the arrays of the
+//! passes through [`SharedSlice`] (each member writes only the chunks it claimed in a pass), so a
+//! pass costs a barrier (well under a microsecond on idle cores) instead of a fork and join
+//! (tens of microseconds when a worker has to be woken).
+
+use std::marker::PhantomData;
+use std::ops::Range;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 
 use crate::error::{Error, Result};
 
@@ -110,6 +121,34 @@ impl WorkerPool {
         (0..n).map(f).collect()
     }
 
+    /// Runs `f` once on every thread of the pool at the same time (on the caller's thread alone
+    /// when serial), each call with its own [`Team`] member (index `0..size`), and returns member
+    /// 0's result. The members share work by [`Team::share`] and meet at [`Team::barrier`], so a
+    /// loop of many short parallel passes (the iterations of a solver) is one parallel region
+    /// instead of a fork and join per pass. Every member must reach the same barriers. A panic in
+    /// one member makes the others' barriers panic too (nobody waits forever), and comes back out
+    /// of this call.
+    pub fn team<R: Send>(&self, f: impl Fn(&Team) -> R + Sync) -> R {
+        #[cfg(feature = "parallel")]
+        if let Some(pool) = &self.pool {
+            let sync = TeamSync::new(self.threads);
+            let run = |index: usize| {
+                let member = Team { index, size: self.threads, sync: &sync, passes: std::cell::Cell::new(0) };
+                match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&member))) {
+                    Ok(result) => result,
+                    Err(panic) => {
+                        sync.poisoned.store(true, Ordering::Release);
+                        std::panic::resume_unwind(panic)
+                    }
+                }
+            };
+            let mut results = pool.install(|| pool.broadcast(|ctx| run(ctx.index())));
+            return results.swap_remove(0);
+        }
+        let sync = TeamSync::new(1);
+        f(&Team { index: 0, size: 1, sync: &sync, passes: std::cell::Cell::new(0) })
+    }
+
     /// Heap bytes attributed to the pool (its threads' stacks are not counted).
     pub fn memory_bytes(&self) -> usize {
         #[cfg(feature = "parallel")]
@@ -117,6 +156,187 @@ impl WorkerPool {
             return std::mem::size_of::<rayon::ThreadPool>();
         }
         0
+    }
+}
+
+/// The meeting point of a team: a sense-reversing barrier (a counter and a generation), and
+/// per member the next unclaimed item of its share in the current pass ([`Team::claim`]).
+struct TeamSync {
+    size: usize,
+    arrived: Padded<AtomicUsize>,
+    generation: Padded<AtomicUsize>,
+    poisoned: AtomicBool,
+    /// Per member: `pass << 32 | next item`.
+    claims: Vec<Padded<AtomicU64>>,
+}
+
+/// A value alone on its cache lines (members spinning on one do not slow the others' writes).
+#[repr(align(128))]
+struct Padded<T>(T);
+
+impl TeamSync {
+    fn new(size: usize) -> Self {
+        Self {
+            size,
+            arrived: Padded(AtomicUsize::new(0)),
+            generation: Padded(AtomicUsize::new(0)),
+            poisoned: AtomicBool::new(false),
+            claims: (0..size).map(|_| Padded(AtomicU64::new(0))).collect(),
+        }
+    }
+}
+
+/// Spins before a waiting member starts yielding its core: a barrier of a solver iteration is
+/// usually passed within microseconds, but a member whose thread was descheduled (a shared
+/// machine, or more members than cores) must not be starved by the others' spinning.
+const SPINS_BEFORE_YIELD: u32 = 1 << 8;
+
+/// One member of a team running a closure on every thread of a pool ([`WorkerPool::team`]).
+pub struct Team<'a> {
+    index: usize,
+    size: usize,
+    sync: &'a TeamSync,
+    /// Passes of [`Team::claim`] so far (the same on every member).
+    passes: std::cell::Cell<u32>,
+}
+
+impl Team<'_> {
+    /// This member's index, `0..size()`.
+    pub fn index(&self) -> usize {
+        self.index
+    }
+
+    /// Members in the team (the pool's threads; 1 when serial).
+    pub fn size(&self) -> usize {
+        self.size
+    }
+
+    /// This member's share of `count` items (chunks): consecutive blocks in member order, fixed
+    /// for a given team size, so each member keeps the same data in its cache from pass to pass.
+    pub fn share(&self, count: usize) -> Range<usize> {
+        Self::share_of(self.index, self.size, count)
+    }
+
+    fn share_of(member: usize, size: usize, count: usize) -> Range<usize> {
+        (member * count / size)..((member + 1) * count / size)
+    }
+
+    /// Calls `f(item)` for the items `0..count` (chunks) this member claims in this pass: the
+    /// items of its own share first ([`Team::share`], in order), then, once those are gone, the
+    /// items left in the other members' shares. Every item is claimed by exactly one member, so
+    /// a member slowed down (a busy core) leaves its work to the others instead of making them
+    /// wait at the next barrier, while on an idle machine each member keeps its own share.
+    ///
+    /// Every member must call this the same number of times, and a barrier must separate two
+    /// calls (a pass that claims from a member's share must be over everywhere before the next
+    /// pass starts claiming from it).
+    pub fn claim(&self, count: usize, mut f: impl FnMut(usize)) {
+        let pass = self.passes.get().wrapping_add(1);
+        self.passes.set(pass);
+        for k in 0..self.size {
+            let member = (self.index + k) % self.size;
+            let range = Self::share_of(member, self.size, count);
+            let counter = &self.sync.claims[member].0;
+            loop {
+                let current = counter.load(Ordering::Acquire);
+                // A counter last used in an earlier pass starts at the share's first item.
+                let next = if (current >> 32) as u32 == pass { current as u32 as usize } else { range.start };
+                if next >= range.end {
+                    break;
+                }
+                let claimed = (pass as u64) << 32 | (next + 1) as u64;
+                if counter.compare_exchange_weak(current, claimed, Ordering::AcqRel, Ordering::Acquire).is_ok() {
+                    f(next);
+                }
+            }
+        }
+    }
+
+    /// Waits until every member has arrived here. Writes made before the barrier by any member
+    /// are seen after it by all. Spins, then yields, never sleeps; panics if another member
+    /// panicked. (Not inlined: profiles then show the time spent waiting.)
+    #[inline(never)]
+    pub fn barrier(&self) {
+        let sync = self.sync;
+        if sync.size == 1 {
+            return;
+        }
+        let generation = sync.generation.0.load(Ordering::Acquire);
+        if sync.arrived.0.fetch_add(1, Ordering::AcqRel) + 1 == sync.size {
+            sync.arrived.0.store(0, Ordering::Relaxed);
+            sync.generation.0.store(generation.wrapping_add(1), Ordering::Release);
+            return;
+        }
+        let mut spins = 0u32;
+        while sync.generation.0.load(Ordering::Acquire) == generation {
+            if sync.poisoned.load(Ordering::Relaxed) {
+                panic!("another member of the worker team panicked");
+            }
+            if spins < SPINS_BEFORE_YIELD {
+                std::hint::spin_loop();
+                spins += 1;
+            } else {
+                std::thread::yield_now();
+            }
+        }
+    }
+}
+
+/// A slice shared by the members of a [`Team`]: between two barriers each member writes only
+/// its own parts of it, and reads the whole of it only in passes where nobody writes it.
+pub struct SharedSlice<'a, T> {
+    ptr: *mut T,
+    len: usize,
+    _borrow: PhantomData<&'a mut [T]>,
+}
+
+// SAFETY: the slice is borrowed mutably for 'a, so only the team uses it; the members' accesses
+// follow the contract of `part` and `whole` (disjoint writes, reads only of what nobody writes).
+unsafe impl<T: Send> Send for SharedSlice<'_, T> {}
+// SAFETY: as above.
+unsafe impl<T: Send + Sync> Sync for SharedSlice<'_, T> {}
+
+impl<'a, T> SharedSlice<'a, T> {
+    /// Shares `slice` for as long as it is borrowed.
+    pub fn new(slice: &'a mut [T]) -> Self {
+        Self { ptr: slice.as_mut_ptr(), len: slice.len(), _borrow: PhantomData }
+    }
+
+    /// Elements in the slice.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// True when the slice has no elements.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The start of the slice, for code that hands disjoint rows of it to unsafe kernels of
+    /// its own (which then keep the contract of [`SharedSlice::part`] themselves).
+    pub fn as_mut_ptr(&self) -> *mut T {
+        self.ptr
+    }
+
+    /// The elements `range`, to write.
+    ///
+    /// # Safety
+    /// Until the next barrier, no other member reads or writes any element of `range`.
+    #[allow(clippy::mut_from_ref)]
+    pub unsafe fn part(&self, range: Range<usize>) -> &mut [T] {
+        assert!(range.start <= range.end && range.end <= self.len, "part {range:?} of a slice of {}", self.len);
+        // SAFETY: in bounds (checked above) of a live, mutably borrowed slice; no other member
+        // touches these elements until the next barrier (the caller's contract).
+        unsafe { std::slice::from_raw_parts_mut(self.ptr.add(range.start), range.end - range.start) }
+    }
+
+    /// The whole slice, to read.
+    ///
+    /// # Safety
+    /// Until the next barrier, no member writes any element (through [`SharedSlice::part`]).
+    pub unsafe fn whole(&self) -> &[T] {
+        // SAFETY: a live slice that nobody writes until the next barrier (the caller's contract).
+        unsafe { std::slice::from_raw_parts(self.ptr, self.len) }
     }
 }
 
@@ -150,6 +370,74 @@ mod tests {
         let pool = WorkerPool::new(2).unwrap();
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             pool.map_collect(10, |i| if i == 7 { panic!("worker") } else { i })
+        }));
+        assert!(result.is_err());
+    }
+
+    /// A barrier-synchronised reduction: every member writes its chunks' partial sums, then
+    /// each adds all of them in chunk order, many times over. Same bits for 1, 2 and 3 threads
+    /// (more members than cores: the barrier must yield, not starve), and every member agrees.
+    #[test]
+    fn team_reductions_do_not_depend_on_thread_count_and_never_deadlock() {
+        use std::sync::atomic::AtomicU64;
+        let run = |threads| {
+            let pool = WorkerPool::new(threads).unwrap();
+            let chunks = 13;
+            let mut data: Vec<f32> = (0..chunks * 100).map(|i| (i as f32 * 0.37).sin()).collect();
+            let partial: Vec<AtomicU64> = (0..chunks).map(|_| AtomicU64::new(0)).collect();
+            let shared = SharedSlice::new(&mut data);
+            let agreed = AtomicUsize::new(0);
+            let total = pool.team(|team| {
+                let mut total = 0.0f64;
+                for round in 0..200 {
+                    let mut claimed = Vec::new();
+                    team.claim(chunks, |c| claimed.push(c));
+                    for c in claimed {
+                        // SAFETY: chunk c was claimed by this member alone in this pass.
+                        let part = unsafe { shared.part(c * 100..(c + 1) * 100) };
+                        let mut sum = 0.0f64;
+                        for x in part.iter_mut() {
+                            *x = (*x * 1.01 + round as f32 * 1e-3).sin();
+                            sum += *x as f64;
+                        }
+                        partial[c].store(sum.to_bits(), Ordering::Relaxed);
+                    }
+                    team.barrier();
+                    let sum: f64 = partial.iter().map(|p| f64::from_bits(p.load(Ordering::Relaxed))).sum();
+                    // SAFETY: nobody writes `data` in this pass.
+                    let first = unsafe { shared.whole()[0] };
+                    total += sum + first as f64;
+                    team.barrier();
+                }
+                if team.size() > 1 || threads <= 1 {
+                    agreed.fetch_add(1, Ordering::Relaxed);
+                }
+                total
+            });
+            (total.to_bits(), data, agreed.into_inner())
+        };
+        let one = run(1);
+        assert_eq!(one.2, 1);
+        for threads in [2, 3] {
+            let many = run(threads);
+            assert_eq!(one.0, many.0);
+            assert_eq!(one.1, many.1);
+            #[cfg(feature = "parallel")]
+            assert_eq!(many.2, threads as usize, "every member ran");
+        }
+    }
+
+    #[test]
+    fn a_panicking_member_does_not_leave_the_others_waiting() {
+        let pool = WorkerPool::new(2).unwrap();
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            pool.team(|team| {
+                if team.index() == team.size() - 1 {
+                    panic!("member");
+                }
+                team.barrier();
+                team.barrier();
+            })
         }));
         assert!(result.is_err());
     }

@@ -15,6 +15,7 @@
 
 use glam::{Vec3, Vec3A};
 
+#[cfg(test)]
 use crate::parallel::WorkerPool;
 
 /// Parts of the dissection with fewer vertices than this are not split further.
@@ -295,7 +296,18 @@ impl Cholesky {
     }
 
     /// `out[i] = A⁻¹ rhs` for the first `len()` entries, using `work` (resized) as scratch.
+    #[cfg(test)]
     pub fn solve(&self, pool: &WorkerPool, rhs: &[Vec3A], out: &mut [Vec3A], work: &mut Vec<Vec3A>) {
+        // Without workers nothing may call rayon (it would use the global pool).
+        let parallel = pool.threads() > 1;
+        pool.install(|| self.solve_on(parallel, rhs, out, work));
+    }
+
+    /// [`Cholesky::solve`] on the calling thread alone when `parallel` is false (inside a team
+    /// region, where the other threads wait at a barrier and take no tasks); the same bits
+    /// either way.
+    #[cfg(test)]
+    pub fn solve_on(&self, parallel: bool, rhs: &[Vec3A], out: &mut [Vec3A], work: &mut Vec<Vec3A>) {
         let n = self.len();
         work.resize(n, Vec3A::ZERO);
         for (w, &i) in work.iter_mut().zip(&self.perm) {
@@ -303,14 +315,62 @@ impl Cholesky {
         }
         let root = self.parts.len() - 1;
         let y = SharedSlice(work.as_mut_ptr(), n);
-        // Without workers nothing may call rayon (it would use the global pool).
-        let parallel = pool.threads() > 1;
-        pool.install(|| {
-            self.forward(root, y, parallel);
-            self.backward(root, y, parallel);
-        });
+        self.forward(root, y, parallel);
+        self.backward(root, y, parallel);
         for (w, &i) in work.iter().zip(&self.perm) {
             out[i as usize] = *w;
+        }
+    }
+
+    /// The two halves of the top dissection (parts to solve at the same time), or None when
+    /// the matrix is one leaf.
+    pub fn top_halves(&self) -> Option<(usize, usize)> {
+        self.parts.last()?.children.map(|(a, b)| (a as usize, b as usize))
+    }
+
+    /// The top part (the whole matrix).
+    pub fn root(&self) -> usize {
+        self.parts.len() - 1
+    }
+
+    /// Rows (in the factor's order) of part `node` and its subtree, and of its separator alone.
+    pub fn part_rows(&self, node: usize) -> (std::ops::Range<usize>, std::ops::Range<usize>) {
+        let part = self.parts[node];
+        (part.start as usize..part.end as usize, part.separator as usize..part.end as usize)
+    }
+
+    /// `perm[k]`: the original index of row k of the factor.
+    pub fn perm(&self) -> &[u32] {
+        &self.perm
+    }
+
+    /// The forward solve `L y = b` of part `node` alone, on this thread: with `separator_only`
+    /// of its separator rows only (the rows of its halves already solved), else of its whole
+    /// subtree. `y` (in the factor's order) holds b on entry.
+    ///
+    /// # Safety
+    /// `y` points to `len()` elements. Meanwhile no other thread reads or writes the rows this
+    /// call writes (its part's), or writes the rows it reads (earlier rows of its subtree).
+    pub unsafe fn forward_part(&self, node: usize, separator_only: bool, y: *mut Vec3A) {
+        let y = SharedSlice(y, self.len());
+        if separator_only {
+            self.forward_separator(node, y);
+        } else {
+            self.forward(node, y, false);
+        }
+    }
+
+    /// The backward solve `Lᵀ x = y` of part `node` alone, on this thread, as
+    /// [`Cholesky::forward_part`] (the rows after the part's, its ancestors' separators, solved).
+    ///
+    /// # Safety
+    /// As [`Cholesky::forward_part`], with the rows it reads being later ones.
+    pub unsafe fn backward_part(&self, node: usize, separator_only: bool, y: *mut Vec3A) {
+        let y = SharedSlice(y, self.len());
+        if separator_only {
+            self.backward_separator(node, y);
+        } else {
+            self.backward(node, y, false);
         }
     }
 
@@ -325,8 +385,14 @@ impl Cholesky {
                 self.forward(b as usize, y, parallel);
             }
         }
+        self.forward_separator(node, y);
+    }
+
+    /// The separator rows of [`Cholesky::forward`].
+    fn forward_separator(&self, node: usize, y: SharedSlice) {
+        let part = self.parts[node];
         // SAFETY: rows separator..end are written by this call only; the rows it reads are
-        // earlier ones of this part's subtree, finished by the calls above.
+        // earlier ones of this part's subtree, finished before it.
         let y = unsafe { y.get() };
         for k in part.separator as usize..part.end as usize {
             let mut acc = y[k];
@@ -340,18 +406,7 @@ impl Cholesky {
     /// Backward solve `Lᵀ x = y` on the rows of part `node` (its separator, then its halves).
     fn backward(&self, node: usize, y: SharedSlice, parallel: bool) {
         let part = self.parts[node];
-        {
-            // SAFETY: rows separator..end are written by this call only; the rows it reads are
-            // later ones (ancestors' separators), finished before this call started.
-            let y = unsafe { y.get() };
-            for k in (part.separator as usize..part.end as usize).rev() {
-                let mut acc = y[k];
-                for p in self.col_ptr[k] as usize..self.col_ptr[k + 1] as usize {
-                    acc -= y[self.col_row[p] as usize] * self.col_val[p];
-                }
-                y[k] = acc * self.inv_diag[k];
-            }
-        }
+        self.backward_separator(node, y);
         if let Some((a, b)) = part.children {
             if parallel && (part.end - part.start) as usize >= PARALLEL_MIN {
                 join(|| self.backward(a as usize, y, true), || self.backward(b as usize, y, true));
@@ -359,6 +414,23 @@ impl Cholesky {
                 self.backward(a as usize, y, parallel);
                 self.backward(b as usize, y, parallel);
             }
+        }
+    }
+}
+
+impl Cholesky {
+    /// The separator rows of [`Cholesky::backward`].
+    fn backward_separator(&self, node: usize, y: SharedSlice) {
+        let part = self.parts[node];
+        // SAFETY: rows separator..end are written by this call only; the rows it reads are
+        // later ones (ancestors' separators), finished before this call started.
+        let y = unsafe { y.get() };
+        for k in (part.separator as usize..part.end as usize).rev() {
+            let mut acc = y[k];
+            for p in self.col_ptr[k] as usize..self.col_ptr[k + 1] as usize {
+                acc -= y[self.col_row[p] as usize] * self.col_val[p];
+            }
+            y[k] = acc * self.inv_diag[k];
         }
     }
 }

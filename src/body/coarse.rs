@@ -13,6 +13,7 @@ use glam::{Vec3, Vec3A};
 
 use super::cholesky::Cholesky;
 use super::forces::Model;
+#[cfg(test)]
 use crate::parallel::WorkerPool;
 
 /// Share of a spring's `h² K_s + h K_d` in the scalar matrix: a spring stiffens only along its
@@ -39,6 +40,44 @@ pub(crate) struct CoarseSpace {
     restricted: Vec<Vec3A>,
     solution: Vec<Vec3A>,
     work: Vec<Vec3A>,
+    /// For the solves split among a team ([`CoarseSpace::split`]): the row of the factor of each
+    /// vertex's aggregate, and the vertices of each row's aggregate (CSR, ascending).
+    row_of: Vec<u32>,
+    member_offsets: Vec<u32>,
+    members: Vec<u32>,
+    /// The restricted residual and the solution in the factor's row order.
+    rows_rhs: Vec<Vec3A>,
+    rows_solution: Vec<Vec3A>,
+}
+
+/// What the members of a team read of a coarse space while they solve it together
+/// ([`CoarseSpace::split`]).
+pub(crate) struct CoarseView<'a> {
+    pub factor: &'a Cholesky,
+    row_of: &'a [u32],
+    member_offsets: &'a [u32],
+    members: &'a [u32],
+}
+
+impl CoarseView<'_> {
+    /// `out[k - rows.start]` = the sum of `r` over the aggregate of factor row k, for the rows
+    /// `rows` (summed in vertex order).
+    pub fn restrict(&self, rows: std::ops::Range<usize>, r: &[Vec3A], out: &mut [Vec3A]) {
+        for (o, k) in out.iter_mut().zip(rows) {
+            let mut sum = Vec3A::ZERO;
+            for &i in &self.members[self.member_offsets[k] as usize..self.member_offsets[k + 1] as usize] {
+                sum += r[i as usize];
+            }
+            *o = sum;
+        }
+    }
+
+    /// The coarse correction at vertex i from the solution `y` in row order (zero for a vertex
+    /// it does not know).
+    #[inline]
+    pub fn correction(&self, i: usize, y: &[Vec3A]) -> Vec3A {
+        self.row_of.get(i).map_or(Vec3A::ZERO, |&k| y[k as usize])
+    }
 }
 
 /// Groups the nodes of a graph (CSR `offsets`, `neighbors`): a node whose neighbours are all free
@@ -146,13 +185,34 @@ impl CoarseSpace {
         }
         let values: Vec<f64> = graph.weights.iter().map(|&e| -w * e).collect();
         let factor = Cholesky::factor(&diagonal, &graph.offsets, &graph.neighbors, &values, &center)?;
-        Some(Self {
+        let mut space = Self {
             aggregate: vertex_group,
             factor,
             restricted: vec![Vec3A::ZERO; count],
             solution: vec![Vec3A::ZERO; count],
             work: Vec::new(),
-        })
+            row_of: Vec::new(),
+            member_offsets: Vec::new(),
+            members: Vec::new(),
+            rows_rhs: vec![Vec3A::ZERO; count],
+            rows_solution: vec![Vec3A::ZERO; count],
+        };
+        space.index_rows();
+        Some(space)
+    }
+
+    /// `row_of` and the members of each row from `aggregate`.
+    fn index_rows(&mut self) {
+        let count = self.factor.len();
+        let mut row = vec![0u32; count];
+        for (k, &g) in self.factor.perm().iter().enumerate() {
+            row[g as usize] = k as u32;
+        }
+        self.row_of = self.aggregate.iter().map(|&g| row[g as usize]).collect();
+        let rows: Vec<[u32; 1]> = self.row_of.iter().map(|&k| [k]).collect();
+        let (offsets, members) = crate::mesh::vertex_incidence(count, &rows, |i, _| i as u32);
+        self.member_offsets = offsets;
+        self.members = members;
     }
 
     /// A topology change appended vertices: each joins the aggregate of its `origin`.
@@ -162,10 +222,27 @@ impl CoarseSpace {
             let group = self.aggregate.get(from as usize).copied().unwrap_or(0);
             self.aggregate.push(group);
         }
+        self.index_rows();
+    }
+
+    /// What a team reads (the factor and the aggregates), and the restricted residual and the
+    /// solution in the factor's row order, which its members write in turn.
+    pub fn split(&mut self) -> (CoarseView<'_>, &mut [Vec3A], &mut [Vec3A]) {
+        (
+            CoarseView {
+                factor: &self.factor,
+                row_of: &self.row_of,
+                member_offsets: &self.member_offsets,
+                members: &self.members,
+            },
+            &mut self.rows_rhs,
+            &mut self.rows_solution,
+        )
     }
 
     /// Solves the coarse system for the residual `r` (summed per aggregate); returns `r·(P x)`,
     /// the coarse part of `r·z`.
+    #[cfg(test)]
     pub fn solve(&mut self, pool: &WorkerPool, r: &[Vec3A]) -> f64 {
         self.restricted.fill(Vec3A::ZERO);
         for (ri, &g) in r.iter().zip(&self.aggregate) {
@@ -176,15 +253,21 @@ impl CoarseSpace {
     }
 
     /// The coarse correction at vertex i (zero for a vertex it does not know).
-    #[inline]
+    #[cfg(test)]
     pub fn correction(&self, i: usize) -> Vec3A {
         self.aggregate.get(i).map_or(Vec3A::ZERO, |&g| self.solution[g as usize])
     }
 
     pub fn memory_bytes(&self) -> usize {
-        self.aggregate.capacity() * 4
+        (self.aggregate.capacity() + self.row_of.capacity() + self.member_offsets.capacity() + self.members.capacity())
+            * 4
             + self.factor.memory_bytes()
-            + (self.restricted.capacity() + self.solution.capacity() + self.work.capacity()) * 16
+            + (self.restricted.capacity()
+                + self.solution.capacity()
+                + self.work.capacity()
+                + self.rows_rhs.capacity()
+                + self.rows_solution.capacity())
+                * 16
     }
 }
 

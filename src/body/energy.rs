@@ -3,6 +3,7 @@
 
 use glam::Vec3;
 
+use super::gas::{FACE_CHUNK, Gas};
 use super::springs::{Springs, spring_energy, spring_strain};
 use crate::parallel::WorkerPool;
 
@@ -14,21 +15,78 @@ pub(crate) fn kinetic(mass: &[f32], v: &[Vec3]) -> f64 {
 /// Springs per parallel chunk (fixed, so the sums do not depend on the thread count).
 const SPRING_CHUNK: usize = 4096;
 
-/// Spring energy (J) and the largest spring strain (0 when none is stretched), in one pass: the
-/// end-of-step stats need both (SPEC 2.5), and each needs every spring's length.
-pub(crate) fn springs_and_max_strain(pool: &WorkerPool, springs: &Springs, x: &[Vec3], ks: f32) -> (f64, f32) {
-    let chunks = springs.len().div_ceil(SPRING_CHUNK);
-    let parts = pool.map_collect(chunks, |c| {
-        let range = c * SPRING_CHUNK..((c + 1) * SPRING_CHUNK).min(springs.len());
-        let (mut energy, mut strain) = (0.0f64, 0.0f32);
-        for (&[i, j], &rest) in springs.ends[range.clone()].iter().zip(&springs.rest[range]) {
-            let (xi, xj) = (x[i as usize], x[j as usize]);
-            energy += spring_energy(xi, xj, rest, ks);
-            strain = strain.max(spring_strain(xi, xj, rest));
+/// Spring energy (J) and the largest spring strain (0 when none is stretched) of spring chunk
+/// `c`: the end-of-step stats need both (SPEC 2.5), and each needs every spring's length.
+fn spring_chunk(springs: &Springs, x: &[Vec3], ks: f32, c: usize) -> (f64, f32) {
+    let range = c * SPRING_CHUNK..((c + 1) * SPRING_CHUNK).min(springs.len());
+    let (mut energy, mut strain) = (0.0f64, 0.0f32);
+    for (&[i, j], &rest) in springs.ends[range.clone()].iter().zip(&springs.rest[range]) {
+        let (xi, xj) = (x[i as usize], x[j as usize]);
+        energy += spring_energy(xi, xj, rest, ks);
+        strain = strain.max(spring_strain(xi, xj, rest));
+    }
+    (energy, strain)
+}
+
+/// Vertices per chunk of [`state_energies`].
+const VERTEX_CHUNK: usize = 4096;
+
+/// The gas of a state for [`state_energies`]: the gas, its fragments' origins
+/// ([`Gas::origins`]), the triangles and their fragments.
+pub(crate) type GasState<'a> = (&'a Gas, &'a [glam::DVec3], &'a [[u32; 3]], &'a [u32]);
+
+/// The energies of a state in one parallel pass (one fork for all of them): kinetic, spring and
+/// gravitational energy (J), the largest spring strain, and the face chunks' parts of each gas
+/// fragment's 6 V for [`Gas::finish_face_chunks`] (empty without gas). The sums do not depend on
+/// the thread count (fixed chunks, added in order).
+pub(crate) fn state_energies(
+    pool: &WorkerPool,
+    springs: &Springs,
+    (x, v, mass): (&[Vec3], &[Vec3], &[f32]),
+    ks: f32,
+    g: Vec3,
+    gas: Option<GasState>,
+) -> (f64, f64, f64, f32, Vec<Vec<f64>>) {
+    enum Part {
+        Springs(usize, f64, f32),
+        Vertices(usize, f64, f64),
+        Faces(usize, Vec<f64>),
+    }
+    let mut parts: Vec<Part> = (0..x.len().div_ceil(VERTEX_CHUNK)).map(|c| Part::Vertices(c, 0.0, 0.0)).collect();
+    parts.extend((0..springs.len().div_ceil(SPRING_CHUNK)).map(|c| Part::Springs(c, 0.0, 0.0)));
+    if let Some((gas, _, triangles, _)) = gas {
+        parts
+            .extend((0..triangles.len().div_ceil(FACE_CHUNK)).map(|c| Part::Faces(c, vec![0.0; gas.fragment_count()])));
+    }
+    pool.for_each_task(&mut parts, |part| match part {
+        Part::Springs(c, energy, strain) => (*energy, *strain) = spring_chunk(springs, x, ks, *c),
+        Part::Vertices(c, kinetic_energy, gravity_energy) => {
+            let range = *c * VERTEX_CHUNK..((*c + 1) * VERTEX_CHUNK).min(x.len());
+            *kinetic_energy = kinetic(&mass[range.clone()], &v[range.clone()]);
+            *gravity_energy = gravity(&mass[range.clone()], &x[range], g);
         }
-        (energy, strain)
+        Part::Faces(c, six_v) => {
+            if let Some((gas, origin, triangles, face_fragment)) = gas {
+                gas.face_chunk_volumes(x, origin, triangles, face_fragment, *c, six_v);
+            }
+        }
     });
-    parts.iter().fold((0.0, 0.0f32), |(e, s), &(pe, ps)| (e + pe, s.max(ps)))
+    let (mut kinetic_energy, mut spring, mut gravity_energy, mut max_strain) = (0.0, 0.0, 0.0, 0.0f32);
+    let mut faces = Vec::new();
+    for part in parts {
+        match part {
+            Part::Springs(_, energy, strain) => {
+                spring += energy;
+                max_strain = max_strain.max(strain);
+            }
+            Part::Vertices(_, k, g) => {
+                kinetic_energy += k;
+                gravity_energy += g;
+            }
+            Part::Faces(_, six_v) => faces.push(six_v),
+        }
+    }
+    (kinetic_energy, spring, gravity_energy, max_strain, faces)
 }
 
 /// Gravitational energy `-Σ m g·x`, J.

@@ -67,6 +67,9 @@ struct Corner {
 /// thread count).
 const VERTEX_CHUNK: usize = 2048;
 
+/// Faces per chunk of the parallel volume measurement (fixed, as above).
+pub(crate) const FACE_CHUNK: usize = 4096;
+
 /// A fragment with less than this fraction of its parent's volume is a shred and keeps no gas.
 pub(crate) const SHRED_FRACTION: f64 = 1e-3;
 
@@ -183,27 +186,48 @@ impl Gas {
     }
 
     /// [`Gas::measure`] in parallel fixed chunks of faces (the volumes differ in rounding only).
+    #[cfg(test)]
     pub fn measure_parallel(&mut self, pool: &WorkerPool, x: &[Vec3], triangles: &[[u32; 3]], face_fragment: &[u32]) {
-        const FACE_CHUNK: usize = 4096;
         let origin = self.origins(x);
         let fragments = self.fragment_count();
         let parts = pool.map_collect(triangles.len().div_ceil(FACE_CHUNK), |c| {
-            let range = c * FACE_CHUNK..((c + 1) * FACE_CHUNK).min(triangles.len());
             let mut six_v = vec![0.0f64; fragments];
-            for (t, &frag) in triangles[range.clone()].iter().zip(&face_fragment[range]) {
-                let o = origin[frag as usize];
-                six_v[frag as usize] +=
-                    tet(o, x[t[0] as usize].as_dvec3(), x[t[1] as usize].as_dvec3(), x[t[2] as usize].as_dvec3());
-            }
+            self.face_chunk_volumes(x, &origin, triangles, face_fragment, c, &mut six_v);
             six_v
         });
-        let mut six_v = vec![0.0f64; fragments];
-        for part in &parts {
+        self.finish_face_chunks(x, &origin, &parts);
+    }
+
+    /// Face chunk `c`'s part of 6 V per fragment into `six_v` (the parallel form of
+    /// [`Gas::measure`]: every chunk, in any order or at the same time, then
+    /// [`Gas::finish_face_chunks`]).
+    pub fn face_chunk_volumes(
+        &self,
+        x: &[Vec3],
+        origin: &[DVec3],
+        triangles: &[[u32; 3]],
+        face_fragment: &[u32],
+        c: usize,
+        six_v: &mut [f64],
+    ) {
+        let range = c * FACE_CHUNK..((c + 1) * FACE_CHUNK).min(triangles.len());
+        six_v.fill(0.0);
+        for (t, &frag) in triangles[range.clone()].iter().zip(&face_fragment[range]) {
+            let o = origin[frag as usize];
+            six_v[frag as usize] +=
+                tet(o, x[t[0] as usize].as_dvec3(), x[t[1] as usize].as_dvec3(), x[t[2] as usize].as_dvec3());
+        }
+    }
+
+    /// Volumes, hole areas and pressures from the face chunks' parts (in chunk order).
+    pub fn finish_face_chunks(&mut self, x: &[Vec3], origin: &[DVec3], parts: &[Vec<f64>]) {
+        let mut six_v = vec![0.0f64; self.fragment_count()];
+        for part in parts {
             for (total, value) in six_v.iter_mut().zip(part) {
                 *total += value;
             }
         }
-        self.finish(x, &origin, six_v);
+        self.finish(x, origin, six_v);
     }
 
     /// [`Gas::measure_with_gradient`] in parallel chunks of vertices: each vertex gathers the
@@ -219,15 +243,12 @@ impl Gas {
         out: &mut [Vec3],
     ) {
         let n = out.len();
-        if self.corner_offsets.len() != n + 1 {
-            self.build_corners(triangles, face_fragment, n);
-        }
-        let origin = self.origins(x);
-        let fragments = self.fragment_count();
+        let origin = self.prepare_gradient(x, triangles, face_fragment, n);
+        let fragments = self.fragment_count().max(1);
         let chunks = n.div_ceil(VERTEX_CHUNK);
         let mut chunk_six_v = std::mem::take(&mut self.chunk_six_v);
         chunk_six_v.clear();
-        chunk_six_v.resize(chunks * fragments.max(1), 0.0);
+        chunk_six_v.resize(chunks * fragments, 0.0);
         struct Task<'a> {
             first: usize,
             out: &'a mut [Vec3],
@@ -235,65 +256,94 @@ impl Gas {
         }
         let mut tasks: Vec<Task> = out
             .chunks_mut(VERTEX_CHUNK)
-            .zip(chunk_six_v.chunks_mut(fragments.max(1)))
+            .zip(chunk_six_v.chunks_mut(fragments))
             .enumerate()
             .map(|(c, (out, six_v))| Task { first: c * VERTEX_CHUNK, out, six_v })
             .collect();
         let this = &*self;
-        pool.for_each_task(&mut tasks, |task| {
-            for (k, g) in task.out.iter_mut().enumerate() {
-                let v = task.first + k;
-                let mut sum = Vec3::ZERO;
-                let p0 = x[v].as_dvec3();
-                let fan = &this.corners[this.corner_offsets[v] as usize..this.corner_offsets[v + 1] as usize];
-                if this.closed_fan[v] {
-                    // Around a closed ring `Σ (b - o)×(c - o) = Σ b×c` for any origin o, so the
-                    // gradient is summed about the vertex itself in f32: short edges, no
-                    // cancellation (about o, the f64 terms are ~|x - o|² for a sum the size of
-                    // the fan's area). Only each face's volume term (at its corner 0) needs o and
-                    // f64. On the issue-5 balloon (one thread, perf) this pass went from 9.2% of an
-                    // implicit step in f64 to 6.0%.
-                    let xv = Vec3A::from(x[v]);
-                    let mut across_sum = Vec3A::ZERO;
-                    let mut gas = false;
-                    for corner in fan {
-                        let frag = (corner.fragment_first >> 1) as usize;
-                        let (b, c) = (x[corner.next as usize], x[corner.prev as usize]);
-                        across_sum += (Vec3A::from(b) - xv).cross(Vec3A::from(c) - xv);
-                        gas |= this.n_rt[frag] > 0.0;
-                        if corner.fragment_first & 1 != 0 {
-                            let o = origin[frag];
-                            task.six_v[frag] += (p0 - o).dot((b.as_dvec3() - o).cross(c.as_dvec3() - o));
-                        }
-                    }
-                    *g = if gas { Vec3::from(across_sum * (1.0 / 6.0)) } else { Vec3::ZERO };
-                    continue;
-                }
+        pool.for_each_task(&mut tasks, |task| this.gradient_rows(x, &origin, task.first, task.out, task.six_v));
+        self.finish_gradient(x, &origin, &chunk_six_v, out);
+        self.chunk_six_v = chunk_six_v;
+    }
+
+    /// The start of the parallel gathering ([`Gas::gradient_rows`] on every chunk of vertices,
+    /// then [`Gas::finish_gradient`]): makes the corner lists on the first call after a topology
+    /// change; returns the fragments' origins.
+    pub fn prepare_gradient(
+        &mut self,
+        x: &[Vec3],
+        triangles: &[[u32; 3]],
+        face_fragment: &[u32],
+        n: usize,
+    ) -> Vec<DVec3> {
+        if self.corner_offsets.len() != n + 1 {
+            self.build_corners(triangles, face_fragment, n);
+        }
+        self.origins(x)
+    }
+
+    /// `∂V/∂x` (without the caps' share) at the vertices `first..first + out.len()` into `out`,
+    /// and their faces' part of 6 V per fragment into `six_v` (which it zeroes first).
+    pub fn gradient_rows(&self, x: &[Vec3], origin: &[DVec3], first: usize, out: &mut [Vec3], six_v: &mut [f64]) {
+        six_v.fill(0.0);
+        for (k, g) in out.iter_mut().enumerate() {
+            let v = first + k;
+            let mut sum = Vec3::ZERO;
+            let p0 = x[v].as_dvec3();
+            let fan = &self.corners[self.corner_offsets[v] as usize..self.corner_offsets[v + 1] as usize];
+            if self.closed_fan[v] {
+                // Around a closed ring `Σ (b - o)×(c - o) = Σ b×c` for any origin o, so the
+                // gradient is summed about the vertex itself in f32: short edges, no
+                // cancellation (about o, the f64 terms are ~|x - o|² for a sum the size of
+                // the fan's area). Only each face's volume term (at its corner 0) needs o and
+                // f64. On the issue-5 balloon (one thread, perf) this pass went from 9.2% of an
+                // implicit step in f64 to 6.0%.
+                let xv = Vec3A::from(x[v]);
+                let mut across_sum = Vec3A::ZERO;
+                let mut gas = false;
                 for corner in fan {
                     let frag = (corner.fragment_first >> 1) as usize;
-                    let o = origin[frag];
-                    let (p1, p2) = (x[corner.next as usize].as_dvec3() - o, x[corner.prev as usize].as_dvec3() - o);
-                    // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
-                    let across = p1.cross(p2);
+                    let (b, c) = (x[corner.next as usize], x[corner.prev as usize]);
+                    across_sum += (Vec3A::from(b) - xv).cross(Vec3A::from(c) - xv);
+                    gas |= self.n_rt[frag] > 0.0;
                     if corner.fragment_first & 1 != 0 {
-                        task.six_v[frag] += (p0 - o).dot(across);
-                    }
-                    if this.n_rt[frag] > 0.0 {
-                        sum += (across * SIXTH).as_vec3();
+                        let o = origin[frag];
+                        six_v[frag] += (p0 - o).dot((b.as_dvec3() - o).cross(c.as_dvec3() - o));
                     }
                 }
-                *g = sum;
+                *g = if gas { Vec3::from(across_sum * (1.0 / 6.0)) } else { Vec3::ZERO };
+                continue;
             }
-        });
+            for corner in fan {
+                let frag = (corner.fragment_first >> 1) as usize;
+                let o = origin[frag];
+                let (p1, p2) = (x[corner.next as usize].as_dvec3() - o, x[corner.prev as usize].as_dvec3() - o);
+                // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
+                let across = p1.cross(p2);
+                if corner.fragment_first & 1 != 0 {
+                    six_v[frag] += (p0 - o).dot(across);
+                }
+                if self.n_rt[frag] > 0.0 {
+                    sum += (across * SIXTH).as_vec3();
+                }
+            }
+            *g = sum;
+        }
+    }
+
+    /// The end of the parallel gathering: adds the chunks' parts of 6 V (`chunk_six_v`,
+    /// `max(fragments, 1)` per chunk, in chunk order) and the caps' share of the gradient `out`,
+    /// and sets volumes, hole areas and pressures.
+    pub fn finish_gradient(&mut self, x: &[Vec3], origin: &[DVec3], chunk_six_v: &[f64], out: &mut [Vec3]) {
+        let fragments = self.fragment_count();
         let mut six_v = vec![0.0f64; fragments];
         for part in chunk_six_v.chunks_exact(fragments.max(1)) {
             for (total, value) in six_v.iter_mut().zip(part) {
                 *total += value;
             }
         }
-        self.chunk_six_v = chunk_six_v;
         self.cap_gradient(x, out);
-        self.finish(x, &origin, six_v);
+        self.finish(x, origin, six_v);
     }
 
     /// The corners at each vertex (CSR, faces ascending).
@@ -325,7 +375,7 @@ impl Gas {
     }
 
     /// The origin of each fragment's volume sums: one of its vertices (accuracy only).
-    fn origins(&self, x: &[Vec3]) -> Vec<DVec3> {
+    pub fn origins(&self, x: &[Vec3]) -> Vec<DVec3> {
         self.reference_vertex
             .iter()
             .map(|&v| if v == u32::MAX { DVec3::ZERO } else { x[v as usize].as_dvec3() })

@@ -21,12 +21,12 @@
 
 use glam::{Mat3A, Vec3, Vec3A, Vec4};
 
-use super::coarse::CoarseSpace;
+use super::coarse::{CoarseSpace, CoarseView};
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::Gas;
-use super::obstacles::{Obstacle, touching};
+use super::obstacles::{Obstacle, resolve, touching};
 use super::springs::{is_degenerate, spring_block_coefficients};
-use crate::parallel::WorkerPool;
+use crate::parallel::{SharedSlice, Team, WorkerPool};
 
 /// One spring seen from one of its ends: the block `alpha I + beta u uᵀ` of the system matrix
 /// that couples the two ends (`h²` times the stiffness block plus `h` times the damping), held
@@ -100,12 +100,10 @@ pub(crate) struct ImplicitScratch {
     ap: Vec<Vec3A>,
     /// The inverted 3x3 diagonal block of each vertex (the block-Jacobi preconditioner).
     inv_diag: Vec<Mat3A>,
-    /// Per vertex, the sum of the magnitudes of the forces acting on it (springs, gas, gravity):
-    /// the scale that the residual of the solve is measured against.
-    magnitude: Vec<f32>,
-    /// Per fragment `h² P/V` (gas rank-one term), `Σ g·v` and a per-fragment dot product buffer.
+    /// Per chunk of vertices, the sums of the team passes.
+    sums: ChunkSums,
+    /// Per fragment `h² P/V` (gas rank-one term); `gas_dot` only counts the fragments.
     gas_coef: Vec<f64>,
-    gas_dot_v: Vec<f64>,
     gas_dot: Vec<f64>,
     /// Per chunk of vertices and per fragment, that chunk's part of `Σ g·p`.
     gas_partial: Vec<f64>,
@@ -152,12 +150,8 @@ impl ImplicitScratch {
             + self.coupling.capacity() * std::mem::size_of::<Coupling>()
             + self.neighbor.capacity() * 4
             + self.spring_terms.capacity() * std::mem::size_of::<SpringTerms>()
-            + (self.gas_coef.capacity()
-                + self.gas_dot_v.capacity()
-                + self.gas_dot.capacity()
-                + self.gas_partial.capacity())
-                * 8
-            + self.magnitude.capacity() * 4
+            + (self.gas_coef.capacity() + self.gas_dot.capacity() + self.gas_partial.capacity()) * 8
+            + self.sums.memory_bytes()
             + self.inv_diag.capacity() * std::mem::size_of::<Mat3A>()
             + self.coarse.as_ref().map_or(0, CoarseSpace::memory_bytes)
     }
@@ -179,6 +173,9 @@ const CG_FORCE_TOLERANCE: f64 = 1e-4;
 
 /// Vertices per parallel chunk (fixed, so the result does not depend on the thread count).
 const CHUNK: usize = 1024;
+
+/// Springs per chunk of the spring pass (any split gives the same result: no sums).
+const SPRING_CHUNK: usize = 2048;
 
 /// `a bᵀ`.
 fn outer(a: Vec3A, b: Vec3A) -> Mat3A {
@@ -224,17 +221,67 @@ struct AssemblyTask<'a> {
     neighbor: &'a mut [u32],
     rhs: &'a mut [Vec3A],
     inv_diag: &'a mut [Mat3A],
-    magnitude: &'a mut [f32],
     /// The start of the solve: Δv (the warm start) and the contact filters (empty without
     /// obstacles).
     dv: &'a mut [Vec3A],
     contact: &'a mut [ContactFilter],
-    /// Over the chunk: `Σ g·Δv` per gas fragment (the start of the solve), `Σ magnitude²`,
-    /// `Σ |rhs|²` and whether a contact holds.
+    /// Over the chunk: `Σ g·Δv` per gas fragment (the start of the solve).
     gas: &'a mut [f64],
-    magnitude_squared: f64,
-    rhs_squared: f64,
-    any_contact: bool,
+}
+
+/// The assembly of a chunk of vertices; returns its `Σ magnitude²`, `Σ |rhs|²` and whether a
+/// contact holds.
+fn assemble_chunk(
+    sys: &System,
+    terms: &[SpringTerms],
+    force: &[Vec3],
+    previous_dv: &[Vec3A],
+    gas_dot_v: &[f64],
+    obstacles: &[Obstacle],
+    t: AssemblyTask,
+) -> (f64, f64, bool) {
+    let model = sys.model;
+    let mut cursor = 0;
+    t.gas.fill(0.0);
+    let mut run = GasRun::default();
+    let (mut magnitude_squared, mut rhs_squared, mut any_contact) = (0.0f64, 0.0f64, false);
+    for k in 0..t.rhs.len() {
+        let i = t.first + k;
+        let count = model.springs.around(i).len();
+        // The same operations as `external_forces` and `add_gas_forces_parallel`.
+        let f = force.get(i).copied().unwrap_or_else(|| {
+            let mut f = model.settings.gravity * model.mass[i];
+            if let Some(frag) = sys.fragment(i) {
+                f += sys.gradient[i] * sys.gas_pressure[frag] as f32;
+            }
+            f
+        });
+        let (rhs, mut inv_diag, magnitude) = assemble_vertex(
+            sys,
+            terms,
+            i,
+            f,
+            gas_dot_v,
+            &mut t.coupling[cursor..cursor + count],
+            &mut t.neighbor[cursor..cursor + count],
+        );
+        cursor += count;
+        let (dv, filter) = start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, previous_dv[i], &mut inv_diag);
+        t.rhs[k] = rhs;
+        t.inv_diag[k] = inv_diag;
+        t.dv[k] = dv;
+        if let Some(frag) = sys.fragment(i) {
+            run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(dv) as f64);
+        }
+        if let Some(slot) = t.contact.get_mut(k) {
+            *slot = filter;
+            any_contact |= filter != ContactFilter::Free;
+        }
+        magnitude_squared += (magnitude as f64) * (magnitude as f64);
+        rhs_squared += rhs.length_squared() as f64;
+    }
+    run.flush(t.gas);
+    (magnitude_squared, rhs_squared, any_contact)
 }
 
 /// The start of the solve at vertex i: Δv from the warm start `guess` and, if it rests on an
@@ -299,9 +346,6 @@ struct SpringTerms {
     force: Vec3,
     stretch: f32,
 }
-
-/// Springs per parallel chunk of the spring pass.
-const SPRING_CHUNK: usize = 4096;
 
 /// The terms of spring `k` (SPEC 2.1 force and damping, the stiffness block of `springs`).
 fn spring_terms(sys: &System, k: usize) -> SpringTerms {
@@ -386,7 +430,8 @@ struct ProductTask<'a> {
 }
 
 /// Rows `first..` of `A input` for the system matrix `M - h² K - h D` (pinned rows zero, contact
-/// constraints filtered out when `contact` is not empty); `gas_dot` holds `Σ g·input` per fragment.
+/// constraints filtered out when `contact` is not empty); `gas_scale` holds `h² P/V Σ g·input` per
+/// fragment ([`gas_scale`]).
 ///
 /// The couplings of each row are summed by [`row_sum`], or by [`row_sum_avx2`] two at a time
 /// when the processor has AVX2 and FMA (checked at run time: the library is built for baseline
@@ -397,16 +442,16 @@ fn product_rows(
     contact: &[ContactFilter],
     (coupling, neighbor): (&[Coupling], &[u32]),
     input: &[Vec3A],
-    gas_dot: &[f64],
+    gas_scale: &[f32],
     task: &mut ProductTask,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: the processor has the features the function is compiled for (checked above).
-        unsafe { product_rows_avx2(sys, contact, (coupling, neighbor), input, gas_dot, task) };
+        unsafe { product_rows_avx2(sys, contact, (coupling, neighbor), input, gas_scale, task) };
         return;
     }
-    product_rows_with(sys, contact, (coupling, neighbor), input, gas_dot, task, row_sum);
+    product_rows_with(sys, contact, (coupling, neighbor), input, gas_scale, task, row_sum);
 }
 
 /// [`product_rows`] compiled for AVX2 and FMA.
@@ -420,10 +465,10 @@ unsafe fn product_rows_avx2(
     contact: &[ContactFilter],
     coupling: (&[Coupling], &[u32]),
     input: &[Vec3A],
-    gas_dot: &[f64],
+    gas_scale: &[f32],
     task: &mut ProductTask,
 ) {
-    product_rows_with(sys, contact, coupling, input, gas_dot, task, |c, n, input, xi| {
+    product_rows_with(sys, contact, coupling, input, gas_scale, task, |c, n, input, xi| {
         // SAFETY: this function runs only where AVX2 and FMA are available.
         unsafe { row_sum_avx2(c, n, input, xi) }
     });
@@ -436,7 +481,7 @@ fn product_rows_with(
     contact: &[ContactFilter],
     (coupling, neighbor): (&[Coupling], &[u32]),
     input: &[Vec3A],
-    gas_dot: &[f64],
+    gas_scale: &[f32],
     task: &mut ProductTask,
     sum: impl Fn(&[Coupling], &[u32], &[Vec3A], Vec3A) -> Vec3A,
 ) {
@@ -453,7 +498,7 @@ fn product_rows_with(
         let (start, end) = (offsets[i] as usize, offsets[i + 1] as usize);
         let mut acc = xi * model.mass[i] + sum(&coupling[start..end], &neighbor[start..end], input, xi);
         if let Some(frag) = sys.fragment(i) {
-            acc += Vec3A::from(sys.gradient[i]) * (sys.gas_coef[frag] * gas_dot[frag]) as f32;
+            acc += Vec3A::from(sys.gradient[i]) * gas_scale[frag];
         }
         if let Some(filter) = contact.get(i) {
             acc = filter.apply(acc);
@@ -531,49 +576,23 @@ unsafe fn row_sum_avx2(coupling: &[Coupling], neighbor: &[u32], input: &[Vec3A],
     }
 }
 
-/// `out = A input` in parallel chunks; returns `input·out` summed in chunk order.
-fn product(
-    pool: &WorkerPool,
-    sys: &System,
-    contact: &[ContactFilter],
-    coupling: (&[Coupling], &[u32]),
-    input: &[Vec3A],
-    gas_dot: &[f64],
-    out: &mut [Vec3A],
-) -> f64 {
-    let mut tasks: Vec<ProductTask> =
-        out.chunks_mut(CHUNK).enumerate().map(|(c, out)| ProductTask { first: c * CHUNK, out, dot: 0.0 }).collect();
-    pool.for_each_task(&mut tasks, |t| product_rows(sys, contact, coupling, input, gas_dot, t));
-    tasks.iter().map(|t| t.dot).sum()
-}
-
-/// `Σ g·value(i)` per gas fragment into `out` (no gas: nothing).
-fn gas_dots(sys: &System, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
+/// `Σ g·value(i)` over the vertices `rows`, per gas fragment, into `out`.
+fn gas_dots_range(sys: &System, rows: std::ops::Range<usize>, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
     out.fill(0.0);
     let mut run = GasRun::default();
-    for (i, g) in sys.gradient.iter().enumerate() {
+    for i in rows {
         if let Some(frag) = sys.fragment(i) {
-            run.add(out, frag, Vec3A::from(*g).dot(value(i)) as f64);
+            run.add(out, frag, Vec3A::from(sys.gradient[i]).dot(value(i)) as f64);
         }
     }
     run.flush(out);
 }
 
-/// A chunk of the residual update.
-struct ResidualTask<'a> {
-    first: usize,
-    dv: &'a mut [Vec3A],
-    r: &'a mut [Vec3A],
-    z: &'a mut [Vec3A],
-    rr: f64,
-    rz: f64,
-}
-
-/// `Δv += α p`, `r -= α A p`, `z = M⁻¹ r` (filtered by the contacts) in parallel chunks; returns
-/// `(r·r, r·z)` summed in chunk order.
+/// `Δv += α p`, `r -= α A p`, `z = M⁻¹ r` (filtered by the contacts) on the rows `first..` of a
+/// chunk (`ap` holds the chunk's rows of `A p`); returns the chunk's `(r·r, r·z)`.
 #[allow(clippy::too_many_arguments)]
-fn update_residual(
-    pool: &WorkerPool,
+fn residual_chunk(
+    first: usize,
     (dv, r, z): (&mut [Vec3A], &mut [Vec3A], &mut [Vec3A]),
     p: &[Vec3A],
     ap: &[Vec3A],
@@ -582,45 +601,28 @@ fn update_residual(
     alpha: f32,
     any_contact: bool,
 ) -> (f64, f64) {
-    let mut tasks: Vec<ResidualTask> = dv
-        .chunks_mut(CHUNK)
-        .zip(r.chunks_mut(CHUNK))
-        .zip(z.chunks_mut(CHUNK))
-        .enumerate()
-        .map(|(c, ((dv, r), z))| ResidualTask { first: c * CHUNK, dv, r, z, rr: 0.0, rz: 0.0 })
-        .collect();
-    pool.for_each_task(&mut tasks, |t| {
-        let (mut rr, mut rz) = (0.0f64, 0.0f64);
-        for k in 0..t.dv.len() {
-            let i = t.first + k;
-            t.dv[k] += p[i] * alpha;
-            let r = t.r[k] - ap[i] * alpha;
-            let mut z = inv_diag[i] * r;
-            if any_contact {
-                z = contact[i].apply(z);
-            }
-            t.r[k] = r;
-            t.z[k] = z;
-            rr += r.length_squared() as f64;
-            rz += r.dot(z) as f64;
+    let (mut rr, mut rz) = (0.0f64, 0.0f64);
+    for k in 0..dv.len() {
+        let i = first + k;
+        dv[k] += p[i] * alpha;
+        let ri = r[k] - ap[k] * alpha;
+        let mut zi = inv_diag[i] * ri;
+        if any_contact {
+            zi = contact[i].apply(zi);
         }
-        (t.rr, t.rz) = (rr, rz);
-    });
-    tasks.iter().fold((0.0, 0.0), |(rr, rz), t| (rr + t.rr, rz + t.rz))
+        r[k] = ri;
+        z[k] = zi;
+        rr += ri.length_squared() as f64;
+        rz += ri.dot(zi) as f64;
+    }
+    (rr, rz)
 }
 
-/// A chunk of the initial residual.
-struct InitialTask<'a> {
+/// `r = rhs - A Δv`, `z = M⁻¹ r` (both filtered by the contacts) on the rows `first..` of a
+/// chunk (`ap` holds the chunk's rows of `A Δv`); returns the chunk's `r·z`.
+#[allow(clippy::too_many_arguments)]
+fn initial_chunk(
     first: usize,
-    r: &'a mut [Vec3A],
-    z: &'a mut [Vec3A],
-    rz: f64,
-}
-
-/// `r = rhs - A Δv`, `z = M⁻¹ r` (both filtered by the contacts) in parallel chunks; returns `r·z`
-/// summed in chunk order.
-fn initial_residual(
-    pool: &WorkerPool,
     (r, z): (&mut [Vec3A], &mut [Vec3A]),
     rhs: &[Vec3A],
     ap: &[Vec3A],
@@ -628,86 +630,382 @@ fn initial_residual(
     contact: &[ContactFilter],
     any_contact: bool,
 ) -> f64 {
-    let mut tasks: Vec<InitialTask> = r
-        .chunks_mut(CHUNK)
-        .zip(z.chunks_mut(CHUNK))
-        .enumerate()
-        .map(|(c, (r, z))| InitialTask { first: c * CHUNK, r, z, rz: 0.0 })
-        .collect();
-    pool.for_each_task(&mut tasks, |t| {
-        let mut rz = 0.0f64;
-        for k in 0..t.r.len() {
-            let i = t.first + k;
-            let mut r = rhs[i] - ap[i];
-            let mut z = inv_diag[i] * r;
-            if any_contact {
-                r = contact[i].apply(r);
-                z = contact[i].apply(z);
-            }
-            t.r[k] = r;
-            t.z[k] = z;
-            rz += r.dot(z) as f64;
+    let mut rz = 0.0f64;
+    for k in 0..r.len() {
+        let i = first + k;
+        let mut ri = rhs[i] - ap[k];
+        let mut zi = inv_diag[i] * ri;
+        if any_contact {
+            ri = contact[i].apply(ri);
+            zi = contact[i].apply(zi);
         }
-        t.rz = rz;
-    });
-    tasks.iter().map(|t| t.rz).sum()
+        r[k] = ri;
+        z[k] = zi;
+        rz += ri.dot(zi) as f64;
+    }
+    rz
 }
 
-/// A chunk of the search direction update, with its part of `Σ g·p` per fragment.
-struct DirectionTask<'a> {
-    first: usize,
-    p: &'a mut [Vec3A],
-    gas: &'a mut [f64],
-}
-
-/// `p = z + β p` in parallel chunks; each chunk leaves its `Σ g·p` per fragment in its part of
-/// `partial` (`fragments` entries per chunk).
+/// `p = z + β p` (z with the coarse correction) on the rows `first..` of a chunk, leaving the
+/// chunk's `Σ g·p` per fragment in `gas`.
 #[allow(clippy::too_many_arguments)]
-fn update_direction(
-    pool: &WorkerPool,
+fn direction_chunk(
     sys: &System,
+    first: usize,
     p: &mut [Vec3A],
     z: &[Vec3A],
-    coarse: Option<&CoarseSpace>,
+    coarse: Option<(&CoarseView, &[Vec3A])>,
     contact: &[ContactFilter],
     beta: f32,
-    partial: &mut [f64],
-    fragments: usize,
+    gas: &mut [f64],
 ) {
-    let mut gas_chunks = partial.chunks_mut(fragments.max(1));
-    let mut tasks: Vec<DirectionTask> = p
-        .chunks_mut(CHUNK)
-        .enumerate()
-        .map(|(c, p)| DirectionTask {
-            first: c * CHUNK,
-            p,
-            gas: if fragments > 0 { gas_chunks.next().unwrap() } else { &mut [] },
-        })
-        .collect();
-    pool.for_each_task(&mut tasks, |t| {
-        t.gas.fill(0.0);
-        // `Σ g·p` of the current run of vertices of one fragment, in a register: added into
-        // `t.gas` through memory at every vertex it made a chain of loads and stores that set
-        // the pace of this pass.
-        let mut run = GasRun::default();
-        for k in 0..t.p.len() {
-            let i = t.first + k;
-            let mut zi = z[i];
-            if let Some(coarse) = coarse {
-                // The coarse correction, filtered like the rest of z.
-                if sys.model.inv_mass[i] > 0.0 {
-                    let c = coarse.correction(i);
-                    zi += contact.get(i).map_or(c, |f| f.apply(c));
-                }
-            }
-            let value = zi + t.p[k] * beta;
-            t.p[k] = value;
-            if let Some(frag) = sys.fragment(i) {
-                run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(value) as f64);
+    gas.fill(0.0);
+    // `Σ g·p` of the current run of vertices of one fragment, in a register: added into `gas`
+    // through memory at every vertex it made a chain of loads and stores that set the pace of
+    // this pass.
+    let mut run = GasRun::default();
+    for k in 0..p.len() {
+        let i = first + k;
+        let mut zi = z[i];
+        if let Some((coarse, solution)) = coarse {
+            // The coarse correction, filtered like the rest of z.
+            if sys.model.inv_mass[i] > 0.0 {
+                let c = coarse.correction(i, solution);
+                zi += contact.get(i).map_or(c, |f| f.apply(c));
             }
         }
-        run.flush(t.gas);
-    });
+        let value = zi + p[k] * beta;
+        p[k] = value;
+        if let Some(frag) = sys.fragment(i) {
+            run.add(gas, frag, Vec3A::from(sys.gradient[i]).dot(value) as f64);
+        }
+    }
+    run.flush(gas);
+}
+
+/// What the conjugate-gradient solve reads: the system, its right side and preconditioner, and
+/// the stopping rule.
+struct SolveInput<'a> {
+    sys: &'a System<'a>,
+    contact: &'a [ContactFilter],
+    coupling: (&'a [Coupling], &'a [u32]),
+    rhs: &'a [Vec3A],
+    inv_diag: &'a [Mat3A],
+    any_contact: bool,
+    fragments: usize,
+    /// Squared residual norm at which the solve stops.
+    tolerance: f64,
+    max_iterations: usize,
+}
+
+/// The vectors and sums that the members of a team share during the assembly and the solve.
+/// SAFETY (of every `whole` and `part` on them): in each pass (between two barriers) a member
+/// writes only the rows of the chunks it claimed in that pass ([`Team::claim`]: each chunk goes
+/// to exactly one member) of the arrays the pass updates, and reads rows of other chunks only of
+/// arrays that no member writes in that pass.
+struct Shared<'a> {
+    coupling: SharedSlice<'a, Coupling>,
+    neighbor: SharedSlice<'a, u32>,
+    rhs: SharedSlice<'a, Vec3A>,
+    inv_diag: SharedSlice<'a, Mat3A>,
+    contact: SharedSlice<'a, ContactFilter>,
+    terms: SharedSlice<'a, SpringTerms>,
+    dv: SharedSlice<'a, Vec3A>,
+    r: SharedSlice<'a, Vec3A>,
+    z: SharedSlice<'a, Vec3A>,
+    p: SharedSlice<'a, Vec3A>,
+    ap: SharedSlice<'a, Vec3A>,
+    /// Per chunk and fragment: `Σ g·Δv` (the assembly), then `Σ g·p` (the solve).
+    gas: SharedSlice<'a, f64>,
+    /// Per chunk and fragment `Σ g·v`.
+    gas_v: SharedSlice<'a, f64>,
+    /// Per chunk: `p·Ap`, `r·r`, `r·z` of the solve; `Σ magnitude²`, `Σ |rhs|²` and whether a
+    /// contact holds (1) of the assembly.
+    chunk_pap: SharedSlice<'a, f64>,
+    chunk_rr: SharedSlice<'a, f64>,
+    chunk_rz: SharedSlice<'a, f64>,
+    chunk_magnitude: SharedSlice<'a, f64>,
+    chunk_rhs: SharedSlice<'a, f64>,
+    chunk_contact: SharedSlice<'a, bool>,
+    /// The coarse level: what every member reads, the restricted residual and the solution (in
+    /// the factor's row order) and the parts of `r·z` of the two halves of the top dissection
+    /// and of its separator.
+    coarse: Option<CoarseView<'a>>,
+    coarse_rhs: SharedSlice<'a, Vec3A>,
+    coarse_solution: SharedSlice<'a, Vec3A>,
+    coarse_dots: SharedSlice<'a, f64>,
+}
+
+/// Per-chunk sums of the team passes.
+#[derive(Default)]
+struct ChunkSums {
+    pap: Vec<f64>,
+    rr: Vec<f64>,
+    rz: Vec<f64>,
+    magnitude: Vec<f64>,
+    rhs: Vec<f64>,
+    contact: Vec<bool>,
+    gas_v: Vec<f64>,
+    /// `Σ (rhs - m Δv)`, `Σ m` and whether no vertex is pinned.
+    momentum: Vec<(glam::DVec3, f64, bool)>,
+    /// The parts of the coarse `r·z`.
+    coarse_dots: Vec<f64>,
+    /// Per chunk and fragment (at least one) the gas's 6 V.
+    gas_six_v: Vec<f64>,
+}
+
+impl ChunkSums {
+    fn resize(&mut self, chunks: usize, fragments: usize) {
+        for v in [&mut self.pap, &mut self.rr, &mut self.rz, &mut self.magnitude, &mut self.rhs] {
+            v.clear();
+            v.resize(chunks, 0.0);
+        }
+        self.contact.clear();
+        self.contact.resize(chunks, false);
+        self.gas_v.clear();
+        self.gas_v.resize(chunks * fragments, 0.0);
+        self.momentum.clear();
+        self.momentum.resize(chunks, (glam::DVec3::ZERO, 0.0, true));
+        self.coarse_dots.resize(3, 0.0);
+        self.gas_six_v.clear();
+        self.gas_six_v.resize(chunks * fragments.max(1), 0.0);
+    }
+
+    fn memory_bytes(&self) -> usize {
+        (self.pap.capacity()
+            + self.rr.capacity()
+            + self.rz.capacity()
+            + self.magnitude.capacity()
+            + self.rhs.capacity()
+            + self.gas_v.capacity()
+            + self.gas_six_v.capacity())
+            * 8
+            + self.contact.capacity()
+            + self.momentum.capacity() * std::mem::size_of::<(glam::DVec3, f64, bool)>()
+    }
+}
+
+impl Shared<'_> {
+    /// The coarse system for the current residual, solved together: members 0 and 1 restrict
+    /// the residual to the rows of one half of the top dissection each and solve them forward,
+    /// member 0 the separator both ways, then each its half backward (with one member, member 0
+    /// all of it in the same order: the same bits). Returns the coarse part of `r·z`, the same on
+    /// every member.
+    fn coarse_part(&self, team: &Team) -> f64 {
+        let Some(view) = &self.coarse else { return 0.0 };
+        let factor = view.factor;
+        let y = self.coarse_solution.as_mut_ptr();
+        // SAFETY: nobody writes r in this pass.
+        let r = unsafe { self.r.whole() };
+        // Restricts rows `rows` into the right side and the solution, forward solves `node`
+        // (its separator only when `separator_only`).
+        let start = |node: usize, separator_only: bool| {
+            let (subtree, separator) = factor.part_rows(node);
+            let rows = if separator_only { separator } else { subtree };
+            // SAFETY: the rows of this part are this member's alone in this pass (the halves go
+            // to different members, the separator to member 0 after a barrier).
+            let (rhs, solution) =
+                unsafe { (self.coarse_rhs.part(rows.clone()), self.coarse_solution.part(rows.clone())) };
+            view.restrict(rows, r, rhs);
+            solution.copy_from_slice(rhs);
+            // SAFETY: as above; the forward solve of a part reads only earlier rows of its own
+            // subtree.
+            unsafe { factor.forward_part(node, separator_only, y) };
+        };
+        // `rhs·solution` over the rows of a part (its separator only when `separator_only`).
+        let dot = |node: usize, separator_only: bool| -> f64 {
+            let (subtree, separator) = factor.part_rows(node);
+            let rows = if separator_only { separator } else { subtree };
+            // SAFETY: the rows of this part are this member's alone in this pass.
+            let (rhs, solution) = unsafe { (self.coarse_rhs.part(rows.clone()), self.coarse_solution.part(rows)) };
+            rhs.iter().zip(solution.iter()).map(|(a, b)| a.dot(*b) as f64).sum()
+        };
+        let root = factor.root();
+        match factor.top_halves() {
+            None => {
+                if team.index() == 0 {
+                    start(root, false);
+                    // SAFETY: member 0 alone touches the coarse vectors in this pass.
+                    unsafe { factor.backward_part(root, false, y) };
+                    // SAFETY: this member's slot.
+                    unsafe { self.coarse_dots.part(0..3).copy_from_slice(&[dot(root, false), 0.0, 0.0]) };
+                }
+                team.barrier();
+            }
+            Some((a, b)) => {
+                let owner_b = if team.size() > 1 { 1 } else { 0 };
+                let halves = [(a, 0usize, 0), (b, owner_b, 1usize)];
+                for &(node, owner, _) in &halves {
+                    if owner == team.index() {
+                        start(node, false);
+                    }
+                }
+                if team.index() == 0 {
+                    // The separator's right side (its rows are written by nobody else).
+                    let (_, separator) = factor.part_rows(root);
+                    // SAFETY: the separator rows are member 0's in this pass.
+                    let rhs = unsafe { self.coarse_rhs.part(separator.clone()) };
+                    view.restrict(separator.clone(), r, rhs);
+                    // SAFETY: as above.
+                    unsafe { self.coarse_solution.part(separator) }.copy_from_slice(rhs);
+                }
+                team.barrier();
+                if team.index() == 0 {
+                    // SAFETY: member 0 alone works in this pass; the halves were solved before it.
+                    unsafe {
+                        factor.forward_part(root, true, y);
+                        factor.backward_part(root, true, y);
+                        self.coarse_dots.part(2..3)[0] = dot(root, true);
+                    }
+                }
+                team.barrier();
+                for &(node, owner, slot) in &halves {
+                    if owner == team.index() {
+                        // SAFETY: the half's rows are this member's; the separator rows it reads
+                        // were finished before the barrier and nobody writes them now.
+                        unsafe {
+                            factor.backward_part(node, false, y);
+                            self.coarse_dots.part(slot..slot + 1)[0] = dot(node, false);
+                        }
+                    }
+                }
+                team.barrier();
+            }
+        }
+        // SAFETY: nobody writes the slots in this pass.
+        let dots = unsafe { self.coarse_dots.whole() };
+        (dots[0] + dots[1]) + dots[2]
+    }
+
+    /// p = z + (coarse) + β p over the member's chunks, then everyone's Σ g·p.
+    fn direction(&self, team: &Team, input: &SolveInput, beta: f32, gas_dot: &mut [f64]) {
+        let n = self.dv.len();
+        let chunks = n.div_ceil(CHUNK);
+        let fragments = input.fragments;
+        {
+            // SAFETY: nobody writes the coarse solution in this pass.
+            let coarse = self.coarse.as_ref().map(|view| (view, unsafe { self.coarse_solution.whole() }));
+            team.claim(chunks, |c| {
+                let rows = c * CHUNK..((c + 1) * CHUNK).min(n);
+                // SAFETY: p and this chunk's gas sums are written by this member only; z is
+                // written by nobody in this pass.
+                let (p_rows, z_all, gas_part) =
+                    unsafe { (self.p.part(rows), self.z.whole(), self.gas.part(c * fragments..(c + 1) * fragments)) };
+                if beta == 0.0 {
+                    p_rows.fill(Vec3A::ZERO);
+                }
+                direction_chunk(input.sys, c * CHUNK, p_rows, z_all, coarse, input.contact, beta, gas_part);
+            });
+        }
+        team.barrier();
+        // SAFETY: nobody writes the gas sums in this pass.
+        sum_gas_partial(unsafe { self.gas.whole() }, gas_dot);
+    }
+
+    /// Preconditioned conjugate gradients (modified PCG: every vector filtered by the contacts)
+    /// from the start in `dv`, whose `Σ g·Δv` per fragment and chunk is in `gas`; returns the
+    /// iterations. Run by every member of the team.
+    ///
+    /// Each member claims chunks of rows, its own block first ([`Team::claim`]), the passes over
+    /// them are separated by barriers, and every reduction adds the chunks' partial sums in chunk
+    /// order (each member adds all of them itself, so all take the same decisions), so the bits
+    /// never depend on who did which chunk. The coarse solve is split between members 0 and 1
+    /// ([`Shared::coarse_part`]).
+    ///
+    /// On the issue-5 balloon (benches/body_balloon.rs, 2 threads, alternating runs on a quiet
+    /// machine) this region (with the gas gradient, the assembly and the last update in it, one
+    /// fork per substep) took a step from 2.35-2.77 ms (10th percentile 1.48-1.67) with a fork
+    /// and join per pass (four per iteration) to 2.03-2.07 ms (1.25-1.32); claiming instead of
+    /// fixed blocks alone: 2.18-2.34 ms to 2.03-2.07 ms (the two cores of the test machine do not
+    /// run equally fast).
+    fn solve(&self, team: &Team, input: &SolveInput) -> usize {
+        let SolveInput { sys, contact, coupling, rhs, inv_diag, any_contact, fragments, tolerance, max_iterations } =
+            *input;
+        let Shared { dv, r, z, p, ap, gas, chunk_pap, chunk_rr, chunk_rz, .. } = self;
+        let n = dv.len();
+        let chunks = n.div_ceil(CHUNK);
+        let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
+        {
+            let mut gas_dot = vec![0.0f64; fragments];
+            // SAFETY: nobody writes the gas sums (made by the assembly) in this pass.
+            sum_gas_partial(unsafe { gas.whole() }, &mut gas_dot);
+            let scale = gas_scale(sys, &gas_dot);
+            // r = rhs - A Δv, z = M⁻¹ r: a member's rows of r need only its own rows of A Δv, so
+            // no barrier between the two.
+            team.claim(chunks, |c| {
+                // SAFETY: this member's chunks of ap, r, z and of the sums; Δv is written by nobody.
+                let (out, r_rows, z_rows, sum, dv_all) = unsafe {
+                    (ap.part(rows(c)), r.part(rows(c)), z.part(rows(c)), chunk_rz.part(c..c + 1), dv.whole())
+                };
+                let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
+                product_rows(sys, contact, coupling, dv_all, &scale, &mut task);
+                sum[0] = initial_chunk(c * CHUNK, (r_rows, z_rows), rhs, task.out, inv_diag, contact, any_contact);
+            });
+            team.barrier();
+            // SAFETY: nobody writes the chunks' sums in this pass.
+            let mut rz: f64 = unsafe { chunk_rz.whole() }.iter().sum();
+            rz += self.coarse_part(team);
+            self.direction(team, input, 0.0, &mut gas_dot);
+            let mut iterations = 0;
+            while iterations < max_iterations {
+                iterations += 1;
+                let scale = gas_scale(sys, &gas_dot);
+                team.claim(chunks, |c| {
+                    // SAFETY: this member's chunks of ap and of the sums; p is written by nobody.
+                    let (out, sum, p_all) = unsafe { (ap.part(rows(c)), chunk_pap.part(c..c + 1), p.whole()) };
+                    let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
+                    product_rows(sys, contact, coupling, p_all, &scale, &mut task);
+                    sum[0] = task.dot;
+                });
+                team.barrier();
+                // SAFETY: nobody writes the chunks' sums in this pass.
+                let pap: f64 = unsafe { chunk_pap.whole() }.iter().sum();
+                if pap <= 0.0 || !pap.is_finite() {
+                    break;
+                }
+                let alpha = (rz / pap) as f32;
+                // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass.
+                team.claim(chunks, |c| {
+                    // SAFETY: this member's chunks of Δv, r, z, ap and of the sums; p is written by
+                    // nobody.
+                    let (dv_rows, r_rows, z_rows, ap_rows, rr, rz, p_all) = unsafe {
+                        (
+                            dv.part(rows(c)),
+                            r.part(rows(c)),
+                            z.part(rows(c)),
+                            ap.part(rows(c)),
+                            chunk_rr.part(c..c + 1),
+                            chunk_rz.part(c..c + 1),
+                            p.whole(),
+                        )
+                    };
+                    (rr[0], rz[0]) = residual_chunk(
+                        c * CHUNK,
+                        (dv_rows, r_rows, z_rows),
+                        p_all,
+                        ap_rows,
+                        inv_diag,
+                        contact,
+                        alpha,
+                        any_contact,
+                    );
+                });
+                team.barrier();
+                // SAFETY: nobody writes the chunks' sums in this pass.
+                let (rr, rz_next) = unsafe { (chunk_rr.whole(), chunk_rz.whole()) };
+                let (rr, mut rz_next) = rr.iter().zip(rz_next).fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
+                if rr <= tolerance {
+                    break;
+                }
+                rz_next += self.coarse_part(team);
+                let beta = (rz_next / rz) as f32;
+                rz = rz_next;
+                // p = z + β p, with Σ g·p per gas fragment in the same pass.
+                self.direction(team, input, beta, &mut gas_dot);
+            }
+            iterations
+        }
+    }
 }
 
 /// A running sum per fragment over consecutive vertices, added into the per-fragment sums when
@@ -742,6 +1040,12 @@ impl GasRun {
     }
 }
 
+/// `h² P/V Σ g·p` per fragment (as f32, the factor of the gas term of each row of a product)
+/// from `Σ g·p` per fragment: once per product, not once per row.
+fn gas_scale(sys: &System, gas_dot: &[f64]) -> Vec<f32> {
+    sys.gas_coef.iter().zip(gas_dot).map(|(&coef, &dot)| (coef * dot) as f32).collect()
+}
+
 /// `Σ g·p` per fragment from the chunks' parts (in chunk order).
 fn sum_gas_partial(partial: &[f64], gas_dot: &mut [f64]) {
     if gas_dot.is_empty() {
@@ -772,7 +1076,6 @@ pub(crate) fn substep(
     for buffer in [&mut s.rhs, &mut s.dv, &mut s.r, &mut s.z, &mut s.p, &mut s.ap] {
         buffer.resize(n, Vec3A::ZERO);
     }
-    s.magnitude.resize(n, 0.0);
     s.inv_diag.resize(n, Mat3A::ZERO);
     s.coupling.resize(model.springs.adjacency.len(), Coupling::default());
     s.neighbor.resize(model.springs.adjacency.len(), 0);
@@ -787,46 +1090,32 @@ pub(crate) fn substep(
         0.0
     };
     let h2 = h * h;
-    let mut gas_dot_v = std::mem::take(&mut s.gas_dot_v);
+    // `h² P/V` per fragment (the gas rank-one term).
+    let gas_coefficients = |gas: &Gas, out: &mut [f64]| {
+        for (f, coef) in out.iter_mut().enumerate() {
+            let vol = gas.volume[f].max(gas.v_min[f]);
+            *coef = if gas.pressure[f] > 0.0 && vol > 0.0 { (h2 as f64) * gas.pressure[f] / vol } else { 0.0 };
+        }
+    };
+    // The gas gradient: without wind the first pass of the team region below (after
+    // `prepare_gradient` here), with wind here with the external forces.
+    let mut gas_origin = Vec::new();
+    let gradient_in_team = gas.is_some() && !wind;
     if let Some(gas) = gas.as_deref_mut() {
         s.gradient.resize(n, Vec3::ZERO);
-        if wind {
-            add_gas_forces_parallel(model, pool, gas, x, &mut s.gradient, &mut s.force);
-        } else {
-            gas.measure_with_gradient_parallel(pool, x, model.triangles, model.face_fragment, &mut s.gradient);
-        }
         let frags = gas.fragment_count();
         s.gas_coef.clear();
-        s.gas_coef.extend((0..frags).map(|f| {
-            let vol = gas.volume[f].max(gas.v_min[f]);
-            if gas.pressure[f] > 0.0 && vol > 0.0 { (h2 as f64) * gas.pressure[f] / vol } else { 0.0 }
-        }));
+        s.gas_coef.resize(frags, 0.0);
+        if wind {
+            add_gas_forces_parallel(model, pool, gas, x, &mut s.gradient, &mut s.force);
+            gas_coefficients(gas, &mut s.gas_coef);
+        } else {
+            gas_origin = gas.prepare_gradient(x, model.triangles, model.face_fragment, n);
+        }
         s.gas_dot.resize(frags, 0.0);
-        gas_dot_v.resize(frags, 0.0);
     }
-    let no_gas: [u32; 0] = [];
-    let sys = System {
-        model,
-        x,
-        v,
-        h,
-        vertex_fragment: gas.as_deref().map_or(&no_gas[..], |g| &g.vertex_fragment),
-        gradient: &s.gradient,
-        gas_coef: &s.gas_coef,
-        gas_pressure: gas.as_deref().map_or(&[][..], |g| &g.pressure),
-    };
-    if gas.is_some() {
-        gas_dots(&sys, |i| Vec3A::from(v[i]), &mut gas_dot_v);
-    }
-
-    let (magnitude_squared, rhs_squared): (f64, f64);
     // Each spring's terms once, then each vertex gathers its springs'.
     s.spring_terms.resize(model.springs.len(), SpringTerms::default());
-    pool.for_each_chunk_mut(&mut s.spring_terms, SPRING_CHUNK, |c, chunk| {
-        for (k, t) in chunk.iter_mut().enumerate() {
-            *t = spring_terms(&sys, c * SPRING_CHUNK + k);
-        }
-    });
     // The warm start: the previous substep's Δv (the velocity change varies slowly from step
     // to step), or on the first substep the free-fall guess Δv = h g: either solves the rigid
     // translation, the mode that a Jacobi preconditioner dominated by stiff springs resolves
@@ -840,112 +1129,10 @@ pub(crate) fn substep(
     if !obstacles.is_empty() {
         s.contact.resize(n, ContactFilter::Free);
     }
-    // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner (per
-    // vertex the springs are stiff along the surface and soft across it, which a diagonal (per
-    // axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can), then the
-    // start of the solve (warm start, contacts).
-    let any_contact;
-    let mut gas_dot = std::mem::take(&mut s.gas_dot);
-    let mut gas_partial = std::mem::take(&mut s.gas_partial);
-    let fragments = gas_dot.len();
-    gas_partial.resize(n.div_ceil(CHUNK) * fragments, 0.0);
-    {
-        let mut gas_chunks = gas_partial.chunks_mut(fragments.max(1));
-        let mut tasks = Vec::with_capacity(n.div_ceil(CHUNK));
-        let mut coupling = &mut s.coupling[..];
-        let mut neighbor = &mut s.neighbor[..];
-        let mut contact = &mut s.contact[..];
-        let chunks = s
-            .rhs
-            .chunks_mut(CHUNK)
-            .zip(s.inv_diag.chunks_mut(CHUNK))
-            .zip(s.magnitude.chunks_mut(CHUNK))
-            .zip(s.dv.chunks_mut(CHUNK));
-        for (c, (((rhs, inv_diag), magnitude), dv)) in chunks.enumerate() {
-            let first = c * CHUNK;
-            let end = first + rhs.len();
-            let len = (model.springs.offsets[end] - model.springs.offsets[first]) as usize;
-            let (head, tail) = std::mem::take(&mut coupling).split_at_mut(len);
-            coupling = tail;
-            let (neighbor_head, neighbor_tail) = std::mem::take(&mut neighbor).split_at_mut(len);
-            neighbor = neighbor_tail;
-            let contact_len = if contact.is_empty() { 0 } else { rhs.len() };
-            let (contact_head, contact_tail) = std::mem::take(&mut contact).split_at_mut(contact_len);
-            contact = contact_tail;
-            tasks.push(AssemblyTask {
-                first,
-                coupling: head,
-                neighbor: neighbor_head,
-                rhs,
-                inv_diag,
-                magnitude,
-                dv,
-                contact: contact_head,
-                gas: if fragments > 0 { gas_chunks.next().unwrap() } else { &mut [] },
-                magnitude_squared: 0.0,
-                rhs_squared: 0.0,
-                any_contact: false,
-            });
-        }
-        let force = &s.force;
-        let gas_dot_v = &gas_dot_v;
-        let terms = &s.spring_terms;
-        let previous_dv = &s.previous_dv;
-        pool.for_each_task(&mut tasks, |t| {
-            let mut cursor = 0;
-            t.gas.fill(0.0);
-            let mut run = GasRun::default();
-            for k in 0..t.rhs.len() {
-                let i = t.first + k;
-                let count = model.springs.around(i).len();
-                // The same operations as `external_forces` and `add_gas_forces_parallel`.
-                let f = force.get(i).copied().unwrap_or_else(|| {
-                    let mut f = model.settings.gravity * model.mass[i];
-                    if let Some(frag) = sys.fragment(i) {
-                        f += sys.gradient[i] * sys.gas_pressure[frag] as f32;
-                    }
-                    f
-                });
-                let (rhs, mut inv_diag, magnitude) = assemble_vertex(
-                    &sys,
-                    terms,
-                    i,
-                    f,
-                    gas_dot_v,
-                    &mut t.coupling[cursor..cursor + count],
-                    &mut t.neighbor[cursor..cursor + count],
-                );
-                cursor += count;
-                let (dv, filter) = start_vertex(model, obstacles, i, x[i], v[i], rhs, previous_dv[i], &mut inv_diag);
-                t.rhs[k] = rhs;
-                t.inv_diag[k] = inv_diag;
-                t.magnitude[k] = magnitude;
-                t.dv[k] = dv;
-                if let Some(frag) = sys.fragment(i) {
-                    run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(dv) as f64);
-                }
-                if let Some(slot) = t.contact.get_mut(k) {
-                    *slot = filter;
-                    t.any_contact |= filter != ContactFilter::Free;
-                }
-                t.magnitude_squared += (magnitude as f64) * (magnitude as f64);
-                t.rhs_squared += rhs.length_squared() as f64;
-            }
-            run.flush(t.gas);
-        });
-        (magnitude_squared, rhs_squared) =
-            tasks.iter().fold((0.0, 0.0), |(m, r), t| (m + t.magnitude_squared, r + t.rhs_squared));
-        any_contact = tasks.iter().any(|t| t.any_contact);
-    }
-    s.gas_dot_v = gas_dot_v;
-    if !any_contact {
-        s.contact.clear();
-    }
-
-    // Preconditioned conjugate gradients (modified PCG: every vector filtered by the contacts).
-    sum_gas_partial(&gas_partial, &mut gas_dot);
-    product(pool, &sys, &s.contact, (&s.coupling, &s.neighbor), &s.dv, &gas_dot, &mut s.ap);
-    let mut rz = initial_residual(pool, (&mut s.r, &mut s.z), &s.rhs, &s.ap, &s.inv_diag, &s.contact, any_contact);
+    let fragments = s.gas_dot.len();
+    let chunks = n.div_ceil(CHUNK);
+    s.gas_partial.resize(chunks * fragments, 0.0);
+    s.sums.resize(chunks, fragments);
     // The coarse level: made once (again only if the substep length changes; after a topology
     // change it is extended, not remade, so a cracking step costs no factorization).
     if s.coarse_h != h {
@@ -953,117 +1140,246 @@ pub(crate) fn substep(
         s.coarse_h = h;
     }
     let mut coarse = s.coarse.take();
-    if let Some(c) = coarse.as_mut() {
-        rz += c.solve(pool, &s.r);
-    }
-    s.p.fill(Vec3A::ZERO);
-    update_direction(pool, &sys, &mut s.p, &s.z, coarse.as_ref(), &s.contact, 0.0, &mut gas_partial, fragments);
-    sum_gas_partial(&gas_partial, &mut gas_dot);
-    let force_scale = h as f64 * magnitude_squared.sqrt();
-    let rhs_norm = rhs_squared.sqrt();
-    let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
-    let mut iterations = 0;
-    if r0 > 0.0 {
-        let tolerance = r0.powi(2);
-        while iterations < max_iterations {
-            iterations += 1;
-            let pap = product(pool, &sys, &s.contact, (&s.coupling, &s.neighbor), &s.p, &gas_dot, &mut s.ap);
-            if pap <= 0.0 || !pap.is_finite() {
-                break;
-            }
-            let alpha = (rz / pap) as f32;
-            // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass, in
-            // parallel chunks whose sums are added in chunk order.
-            let (rr, rz_next) = update_residual(
-                pool,
-                (&mut s.dv, &mut s.r, &mut s.z),
-                &s.p,
-                &s.ap,
-                &s.inv_diag,
-                &s.contact,
-                alpha,
-                any_contact,
-            );
-            if rr <= tolerance {
-                break;
-            }
-            let mut rz_next = rz_next;
-            if let Some(c) = coarse.as_mut() {
-                rz_next += c.solve(pool, &s.r);
-            }
-            let beta = (rz_next / rz) as f32;
-            rz = rz_next;
-            // p = z + β p, with Σ g·p per gas fragment in the same pass.
-            update_direction(
-                pool,
-                &sys,
-                &mut s.p,
-                &s.z,
-                coarse.as_ref(),
-                &s.contact,
-                beta,
-                &mut gas_partial,
-                fragments,
-            );
-            sum_gas_partial(&gas_partial, &mut gas_dot);
+    let (coarse_view, coarse_rhs, coarse_solution) = match coarse.as_mut() {
+        Some(c) => {
+            let (view, rhs, solution) = c.split();
+            (Some(view), rhs, solution)
         }
-    }
-    s.coarse = coarse;
-    s.gas_partial = gas_partial;
-    s.gas_dot = gas_dot;
-    // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling term
-    // of the matrix sums to zero); a truncated solve leaves a small error there, removed by a
-    // uniform correction. Not with pins or contacts: their reactions are external forces.
-    let mut correction = Vec3A::ZERO;
-    if !any_contact && model.inv_mass.iter().zip(model.mass).all(|(&w, &m)| w > 0.0 || m == 0.0) {
-        let (mut error, mut mass) = (glam::DVec3::ZERO, 0.0f64);
-        for i in 0..n {
-            error += s.rhs[i].as_dvec3() - s.dv[i].as_dvec3() * model.mass[i] as f64;
-            mass += model.mass[i] as f64;
-        }
-        if mass > 0.0 {
-            correction = Vec3A::from((error / mass).as_vec3());
-        }
-    }
-    // v += Δv, friction, x += h v, in parallel chunks.
-    struct FinalTask<'a> {
-        first: usize,
-        x: &'a mut [Vec3],
-        v: &'a mut [Vec3],
-        dv: &'a mut [Vec3A],
-        previous: &'a mut [Vec3A],
-    }
-    let mut tasks: Vec<FinalTask> = x
-        .chunks_mut(CHUNK)
-        .zip(v.chunks_mut(CHUNK))
-        .zip(s.dv.chunks_mut(CHUNK))
-        .zip(s.previous_dv.chunks_mut(CHUNK))
-        .enumerate()
-        .map(|(c, (((x, v), dv), previous))| FinalTask { first: c * CHUNK, x, v, dv, previous })
-        .collect();
-    let contact = &s.contact;
-    pool.for_each_task(&mut tasks, |t| {
-        for k in 0..t.x.len() {
-            let i = t.first + k;
-            t.dv[k] += correction;
-            t.previous[k] = t.dv[k];
-            if model.inv_mass[i] == 0.0 {
-                continue;
-            }
-            let v = &mut t.v[k];
-            *v += Vec3::from(t.dv[k]);
-            if let Some(&ContactFilter::Slide(normal, pushed)) = contact.get(i) {
-                // SPEC 2.3 Coulomb friction on a sliding contact: the tangential speed drops by at
-                // most `friction` times the normal speed change, never past zero.
-                let tangential = *v - normal * v.dot(normal);
-                let speed = tangential.length();
-                if speed > 0.0 {
-                    *v -= tangential * ((model.settings.friction * pushed) / speed).min(1.0);
+        None => (None, &mut [][..], &mut [][..]),
+    };
+    let shared = Shared {
+        coupling: SharedSlice::new(&mut s.coupling),
+        neighbor: SharedSlice::new(&mut s.neighbor),
+        rhs: SharedSlice::new(&mut s.rhs),
+        inv_diag: SharedSlice::new(&mut s.inv_diag),
+        contact: SharedSlice::new(&mut s.contact),
+        terms: SharedSlice::new(&mut s.spring_terms),
+        dv: SharedSlice::new(&mut s.dv),
+        r: SharedSlice::new(&mut s.r),
+        z: SharedSlice::new(&mut s.z),
+        p: SharedSlice::new(&mut s.p),
+        ap: SharedSlice::new(&mut s.ap),
+        gas: SharedSlice::new(&mut s.gas_partial),
+        gas_v: SharedSlice::new(&mut s.sums.gas_v),
+        chunk_pap: SharedSlice::new(&mut s.sums.pap),
+        chunk_rr: SharedSlice::new(&mut s.sums.rr),
+        chunk_rz: SharedSlice::new(&mut s.sums.rz),
+        chunk_magnitude: SharedSlice::new(&mut s.sums.magnitude),
+        chunk_rhs: SharedSlice::new(&mut s.sums.rhs),
+        chunk_contact: SharedSlice::new(&mut s.sums.contact),
+        coarse: coarse_view,
+        coarse_rhs: SharedSlice::new(coarse_rhs),
+        coarse_solution: SharedSlice::new(coarse_solution),
+        coarse_dots: SharedSlice::new(&mut s.sums.coarse_dots),
+    };
+    let force = &s.force;
+    let (gradient, gas_coef) = (SharedSlice::new(&mut s.gradient), SharedSlice::new(&mut s.gas_coef));
+    let (xs, vs, previous) = (SharedSlice::new(x), SharedSlice::new(v), SharedSlice::new(&mut s.previous_dv));
+    let momentum = SharedSlice::new(&mut s.sums.momentum);
+    let gas_six_v = SharedSlice::new(&mut s.sums.gas_six_v);
+    let gas_lock = std::sync::RwLock::new(gas);
+    // Gas gradient, assembly, solve and the update of x and v: one parallel region (see
+    // `Shared::solve`).
+    let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
+    let (iterations, any_contact) = pool.team(|team| {
+        if gradient_in_team {
+            let fragments = fragments.max(1);
+            {
+                let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+                if let Some(gas) = guard.as_deref() {
+                    team.claim(chunks, |c| {
+                        // SAFETY: this member's chunks of the gradient and of the sums; x is
+                        // written by nobody.
+                        let (out, six_v, x) = unsafe {
+                            (gradient.part(rows(c)), gas_six_v.part(c * fragments..(c + 1) * fragments), xs.whole())
+                        };
+                        gas.gradient_rows(x, &gas_origin, c * CHUNK, out, six_v);
+                    });
                 }
             }
-            t.x[k] += *v * h;
+            team.barrier();
+            if team.index() == 0 {
+                let mut guard = gas_lock.write().unwrap_or_else(|e| e.into_inner());
+                if let Some(gas) = guard.as_deref_mut() {
+                    // SAFETY: member 0 alone works in this pass.
+                    unsafe {
+                        gas.finish_gradient(xs.whole(), &gas_origin, gas_six_v.whole(), gradient.part(0..n));
+                        gas_coefficients(gas, gas_coef.part(0..gas_coef.len()));
+                    }
+                }
+            }
+            team.barrier();
         }
+        let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+        let gas = gas_guard.as_deref();
+        let (iterations, any_contact) = {
+            // SAFETY: nobody writes x, v or the warm start until the last pass below, after a
+            // barrier and after the last use of these; nobody writes the gradient and the gas
+            // coefficients from here on.
+            let sys = System {
+                model,
+                x: unsafe { xs.whole() },
+                v: unsafe { vs.whole() },
+                h,
+                vertex_fragment: gas.map_or(&[][..], |g| &g.vertex_fragment),
+                gradient: unsafe { gradient.whole() },
+                gas_coef: unsafe { gas_coef.whole() },
+                gas_pressure: gas.map_or(&[][..], |g| &g.pressure),
+            };
+            let previous_dv = unsafe { previous.whole() };
+            let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
+            // The spring terms (chunks of springs), and `Σ g·v` per chunk of vertices, in one pass.
+            let spring_chunks = model.springs.len().div_ceil(SPRING_CHUNK);
+            let gas_chunks = if fragments > 0 { chunks } else { 0 };
+            team.claim(spring_chunks + gas_chunks, |c| {
+                if c < spring_chunks {
+                    let range = c * SPRING_CHUNK..((c + 1) * SPRING_CHUNK).min(model.springs.len());
+                    let first = range.start;
+                    // SAFETY: this chunk of the terms, written by this member alone.
+                    let terms = unsafe { shared.terms.part(range) };
+                    for (k, t) in terms.iter_mut().enumerate() {
+                        *t = spring_terms(&sys, first + k);
+                    }
+                } else {
+                    let c = c - spring_chunks;
+                    // SAFETY: this chunk's sums, written by this member alone.
+                    let out = unsafe { shared.gas_v.part(gas_rows(c)) };
+                    gas_dots_range(&sys, rows(c), |i| Vec3A::from(sys.v[i]), out);
+                }
+            });
+            team.barrier();
+            let mut gas_dot_v = vec![0.0f64; fragments];
+            // SAFETY: nobody writes the sums or the terms in this pass.
+            let (gas_v, terms) = unsafe { (shared.gas_v.whole(), shared.terms.whole()) };
+            sum_gas_partial(gas_v, &mut gas_dot_v);
+            // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner (per
+            // vertex the springs are stiff along the surface and soft across it, which a diagonal
+            // (per axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can),
+            // then the start of the solve (warm start, contacts).
+            team.claim(chunks, |c| {
+                let rows = rows(c);
+                let (first, end) = (rows.start, rows.end);
+                let adjacency = model.springs.offsets[first] as usize..model.springs.offsets[end] as usize;
+                let has_contact = !obstacles.is_empty();
+                // SAFETY: this member's chunks of every array the assembly writes.
+                let task = unsafe {
+                    AssemblyTask {
+                        first,
+                        coupling: shared.coupling.part(adjacency.clone()),
+                        neighbor: shared.neighbor.part(adjacency),
+                        rhs: shared.rhs.part(rows.clone()),
+                        inv_diag: shared.inv_diag.part(rows.clone()),
+                        dv: shared.dv.part(rows.clone()),
+                        contact: if has_contact { shared.contact.part(rows) } else { &mut [] },
+                        gas: shared.gas.part(gas_rows(c)),
+                    }
+                };
+                let (magnitude, rhs, contact) =
+                    assemble_chunk(&sys, terms, force, previous_dv, &gas_dot_v, obstacles, task);
+                // SAFETY: this chunk's sums, written by this member alone.
+                unsafe {
+                    shared.chunk_magnitude.part(c..c + 1)[0] = magnitude;
+                    shared.chunk_rhs.part(c..c + 1)[0] = rhs;
+                    shared.chunk_contact.part(c..c + 1)[0] = contact;
+                }
+            });
+            team.barrier();
+            // SAFETY: from here on nobody writes the sums of the assembly or what it made.
+            let (magnitude, rhs_sums, contacts) =
+                unsafe { (shared.chunk_magnitude.whole(), shared.chunk_rhs.whole(), shared.chunk_contact.whole()) };
+            let magnitude_squared: f64 = magnitude.iter().sum();
+            let rhs_squared: f64 = rhs_sums.iter().sum();
+            let any_contact = contacts.iter().any(|&c| c);
+            let force_scale = h as f64 * magnitude_squared.sqrt();
+            let rhs_norm = rhs_squared.sqrt();
+            let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
+            if r0 <= 0.0 {
+                (0, any_contact)
+            } else {
+                // SAFETY: as above.
+                let input = unsafe {
+                    SolveInput {
+                        sys: &sys,
+                        contact: if any_contact { shared.contact.whole() } else { &[] },
+                        coupling: (shared.coupling.whole(), shared.neighbor.whole()),
+                        rhs: shared.rhs.whole(),
+                        inv_diag: shared.inv_diag.whole(),
+                        any_contact,
+                        fragments,
+                        tolerance: r0.powi(2),
+                        max_iterations,
+                    }
+                };
+                (shared.solve(team, &input), any_contact)
+            }
+        };
+        // SAFETY: from here on each member reads and writes only the rows of its own chunks (Δv
+        // is no longer written by anyone, the contacts by nobody).
+        let (contact, dv) = unsafe { (if any_contact { shared.contact.whole() } else { &[][..] }, shared.dv.whole()) };
+        // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling
+        // term of the matrix sums to zero); a truncated solve leaves a small error there, removed
+        // by a uniform correction. Not with pins or contacts: their reactions are external
+        // forces.
+        let mut correction = Vec3A::ZERO;
+        if !any_contact {
+            // SAFETY: rhs is written by nobody; the chunk's sums by this member alone.
+            let rhs = unsafe { shared.rhs.whole() };
+            team.claim(chunks, |c| {
+                let (mut error, mut mass, mut free) = (glam::DVec3::ZERO, 0.0f64, true);
+                for i in rows(c) {
+                    error += rhs[i].as_dvec3() - dv[i].as_dvec3() * model.mass[i] as f64;
+                    mass += model.mass[i] as f64;
+                    free &= model.inv_mass[i] > 0.0 || model.mass[i] == 0.0;
+                }
+                unsafe { momentum.part(c..c + 1)[0] = (error, mass, free) };
+            });
+            team.barrier();
+            // SAFETY: nobody writes the sums in this pass.
+            let sums = unsafe { momentum.whole() };
+            if sums.iter().all(|s| s.2) {
+                let (error, mass) = sums.iter().fold((glam::DVec3::ZERO, 0.0f64), |(e, m), s| (e + s.0, m + s.1));
+                if mass > 0.0 {
+                    correction = Vec3A::from((error / mass).as_vec3());
+                }
+            }
+        }
+        // v += Δv, friction, x += h v, then the contact response (SPEC 2.3) of each vertex.
+        let (restitution, friction) = (model.settings.restitution, model.settings.friction);
+        team.claim(chunks, |c| {
+            let rows = rows(c);
+            let first = rows.start;
+            // SAFETY: this member's chunks.
+            let (x, v, previous) = unsafe { (xs.part(rows.clone()), vs.part(rows.clone()), previous.part(rows)) };
+            for k in 0..x.len() {
+                let i = first + k;
+                let dvi = dv[i] + correction;
+                previous[k] = dvi;
+                if model.inv_mass[i] == 0.0 {
+                    continue;
+                }
+                let v = &mut v[k];
+                *v += Vec3::from(dvi);
+                if let Some(&ContactFilter::Slide(normal, pushed)) = contact.get(i) {
+                    // SPEC 2.3 Coulomb friction on a sliding contact: the tangential speed drops
+                    // by at most `friction` times the normal speed change, never past zero.
+                    let tangential = *v - normal * v.dot(normal);
+                    let speed = tangential.length();
+                    if speed > 0.0 {
+                        *v -= tangential * ((model.settings.friction * pushed) / speed).min(1.0);
+                    }
+                }
+                x[k] += *v * h;
+                if !obstacles.is_empty() {
+                    resolve(&mut x[k], v, obstacles, restitution, friction);
+                }
+            }
+        });
+        (iterations, any_contact)
     });
+    if !any_contact {
+        s.contact.clear();
+    }
+    s.coarse = coarse;
     (power * h as f64, iterations)
 }
 

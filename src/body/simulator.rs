@@ -349,22 +349,29 @@ impl Body {
 
     /// The energies of the current state (measures the gas at the current positions).
     fn energy_parts(&mut self) -> EnergyParts {
-        let gas = match self.gas.as_mut() {
-            Some(gas) => {
-                gas.measure_parallel(&self.pool, &self.nodes.x, &self.triangles, &self.face_fragment);
+        let x = &self.nodes.x;
+        let origin = self.gas.as_ref().map(|gas| gas.origins(x));
+        let gas_state = self
+            .gas
+            .as_ref()
+            .zip(origin.as_deref())
+            .map(|(gas, origin)| (gas, origin, &self.triangles[..], &self.face_fragment[..]));
+        let (kinetic, spring, gravity, max_strain, faces) = energy::state_energies(
+            &self.pool,
+            &self.springs,
+            (x, &self.nodes.v, &self.nodes.mass),
+            self.settings.spring_stiffness,
+            self.settings.gravity,
+            gas_state,
+        );
+        let gas = match (self.gas.as_mut(), origin) {
+            (Some(gas), Some(origin)) => {
+                gas.finish_face_chunks(x, &origin, &faces);
                 gas.energy()
             }
-            None => 0.0,
+            _ => 0.0,
         };
-        let (spring, max_strain) =
-            energy::springs_and_max_strain(&self.pool, &self.springs, &self.nodes.x, self.settings.spring_stiffness);
-        EnergyParts {
-            kinetic: energy::kinetic(&self.nodes.mass, &self.nodes.v),
-            spring,
-            gravity: energy::gravity(&self.nodes.mass, &self.nodes.x, self.settings.gravity),
-            gas,
-            max_strain: max_strain as f64,
-        }
+        EnergyParts { kinetic, spring, gravity, gas, max_strain: max_strain as f64 }
     }
 
     /// The largest stable time step of the explicit integrators, `2/ω_max`, s.
@@ -567,8 +574,10 @@ impl Body {
             }
             Scratch::Xpbd(s) => (xpbd::substep(&model, gas, x, v, h, self.settings.iterations, &self.obstacles, s), 0),
         };
-        // XPBD handles contacts inside its iterations.
-        if !self.obstacles.is_empty() && self.settings.integrator != Integrator::Xpbd {
+        // XPBD handles contacts inside its iterations, implicit Euler in its last pass.
+        if !self.obstacles.is_empty()
+            && !matches!(self.settings.integrator, Integrator::Xpbd | Integrator::ImplicitEuler)
+        {
             let (restitution, friction) = (self.settings.restitution, self.settings.friction);
             // In parallel chunks (each vertex on its own): on the issue-5 balloon this serial loop
             // was about 1% of an implicit step, all of it on one thread.
