@@ -19,41 +19,15 @@
 //! sliding contact the block is inverted on the tangent plane (`start_vertex`). On the issue-5
 //! balloon resting on the ground this took the solve from 70 to 7 CG iterations per step.
 
-use glam::{Mat3A, Vec3, Vec3A, Vec4};
+use glam::{Mat3A, Vec3, Vec3A};
 
 use super::coarse::{CoarseSpace, CoarseView};
+use super::coupling_slices::{Coupling, CouplingGroup, CouplingSlices, SLICE, SliceRowsMut, for_each_row_sum, group_range};
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::Gas;
 use super::obstacles::{Obstacle, resolve, touching};
 use super::springs::{is_degenerate, spring_block_coefficients};
 use crate::parallel::{SharedSlice, Team, WorkerPool};
-
-/// One spring seen from one of its ends: the block `alpha I + beta u uᵀ` of the system matrix
-/// that couples the two ends (`h²` times the stiffness block plus `h` times the damping), held
-/// as `alpha I + w wᵀ` with `w = √beta u` (beta ≥ 0) in 16 bytes (w in x, y, z, alpha in the
-/// fourth lane): the products with the matrix stream this array, so its size is their speed.
-#[derive(Clone, Copy, Default)]
-#[repr(transparent)]
-struct Coupling(Vec4);
-
-impl Coupling {
-    fn new(u: Vec3A, alpha: f32, beta: f32) -> Self {
-        Coupling((u * beta.max(0.0).sqrt()).extend(alpha))
-    }
-
-    /// `w` (the fourth lane is ignored by every Vec3A dot product and length).
-    #[inline(always)]
-    fn w(self) -> Vec3A {
-        Vec3A::from_vec4(self.0)
-    }
-
-    /// The block times `d`.
-    #[inline(always)]
-    fn apply(self, d: Vec3A) -> Vec3A {
-        let w = self.w();
-        d * self.0.w + w * w.dot(d)
-    }
-}
 
 /// How a vertex in contact with an obstacle is constrained inside the solve (Baraff and Witkin
 /// 1998, modified PCG): its constrained velocity components are filtered out of the residual and
@@ -86,10 +60,9 @@ pub(crate) struct ImplicitScratch {
     /// only with wind: otherwise the assembly computes gravity and pressure per vertex.
     pub force: Vec<Vec3>,
     pub gradient: Vec<Vec3>,
-    /// Per entry of `Springs::adjacency`: the coupling block of that (vertex, spring) pair, and
-    /// its other end (the products read these 20 bytes, not the 8-byte adjacency entry).
-    coupling: Vec<Coupling>,
-    neighbor: Vec<u32>,
+    /// The coupling block of every (vertex, spring) pair with its other end, by slices of rows
+    /// (`coupling_slices`: the products stream these).
+    couplings: CouplingSlices,
     /// Per spring, its share of the assembly.
     spring_terms: Vec<SpringTerms>,
     rhs: Vec<Vec3A>,
@@ -147,8 +120,7 @@ impl ImplicitScratch {
                 + self.previous_dv.capacity())
                 * 16
             + self.contact.capacity() * std::mem::size_of::<ContactFilter>()
-            + self.coupling.capacity() * std::mem::size_of::<Coupling>()
-            + self.neighbor.capacity() * 4
+            + self.couplings.memory_bytes()
             + self.spring_terms.capacity() * std::mem::size_of::<SpringTerms>()
             + (self.gas_coef.capacity() + self.gas_dot.capacity() + self.gas_partial.capacity()) * 8
             + self.sums.memory_bytes()
@@ -171,8 +143,10 @@ const CG_RELATIVE_TOLERANCE: f64 = 3e-3;
 /// the settled zero-gravity balloon iterating 10-30 times a step on that noise).
 const CG_FORCE_TOLERANCE: f64 = 1e-4;
 
-/// Vertices per parallel chunk (fixed, so the result does not depend on the thread count).
+/// Vertices per parallel chunk (fixed, so the result does not depend on the thread count; whole
+/// slices of the coupling layout).
 const CHUNK: usize = 1024;
+const _: () = assert!(CHUNK % SLICE == 0);
 
 /// Springs per chunk of the spring pass (any split gives the same result: no sums).
 const SPRING_CHUNK: usize = 2048;
@@ -217,8 +191,7 @@ impl System<'_> {
 /// A chunk of vertices for the assembly pass, with the matching parts of the output arrays.
 struct AssemblyTask<'a> {
     first: usize,
-    coupling: &'a mut [Coupling],
-    neighbor: &'a mut [u32],
+    couplings: SliceRowsMut<'a>,
     rhs: &'a mut [Vec3A],
     inv_diag: &'a mut [Mat3A],
     /// The start of the solve: Δv (the warm start) and the contact filters (empty without
@@ -241,13 +214,12 @@ fn assemble_chunk(
     t: AssemblyTask,
 ) -> (f64, f64, bool) {
     let model = sys.model;
-    let mut cursor = 0;
+    let mut t = t;
     t.gas.fill(0.0);
     let mut run = GasRun::default();
     let (mut magnitude_squared, mut rhs_squared, mut any_contact) = (0.0f64, 0.0f64, false);
     for k in 0..t.rhs.len() {
         let i = t.first + k;
-        let count = model.springs.around(i).len();
         // The same operations as `external_forces` and `add_gas_forces_parallel`.
         let f = force.get(i).copied().unwrap_or_else(|| {
             let mut f = model.settings.gravity * model.mass[i];
@@ -256,16 +228,7 @@ fn assemble_chunk(
             }
             f
         });
-        let (rhs, mut inv_diag, magnitude) = assemble_vertex(
-            sys,
-            terms,
-            i,
-            f,
-            gas_dot_v,
-            &mut t.coupling[cursor..cursor + count],
-            &mut t.neighbor[cursor..cursor + count],
-        );
-        cursor += count;
+        let (rhs, mut inv_diag, magnitude) = assemble_vertex(sys, terms, i, f, gas_dot_v, &mut t.couplings);
         let (dv, filter) = start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, previous_dv[i], &mut inv_diag);
         t.rhs[k] = rhs;
         t.inv_diag[k] = inv_diag;
@@ -381,8 +344,7 @@ fn assemble_vertex(
     i: usize,
     force: Vec3,
     gas_dot_v: &[f64],
-    coupling: &mut [Coupling],
-    neighbor: &mut [u32],
+    couplings: &mut SliceRowsMut,
 ) -> (Vec3A, Mat3A, f32) {
     let model = sys.model;
     let h = sys.h;
@@ -392,19 +354,20 @@ fn assemble_vertex(
     let mut diag = Mat3A::ZERO;
     let mut diag_scalar = model.mass[i];
     let mut magnitude = model.mass[i] * model.settings.gravity.length();
-    for ((slot, other), &(spring, j)) in coupling.iter_mut().zip(neighbor.iter_mut()).zip(model.springs.around(i)) {
-        *other = j;
+    let around = model.springs.around(i);
+    for (k, &(spring, j)) in around.iter().enumerate() {
         let t = &terms[spring as usize];
         // `Springs::ends` holds each spring as [lower, higher] vertex.
         let sign = if (i as u32) < j { 1.0 } else { -1.0 };
         f += Vec3A::from(t.force) * sign;
         kv += t.kv * sign;
-        *slot = t.coupling;
+        couplings.set(i, k, t.coupling, j);
         let w = t.coupling.w();
         diag += outer(w, w);
         diag_scalar += t.coupling.0.w;
         magnitude += t.stretch;
     }
+    couplings.finish_row(i, around.len());
     diag += Mat3A::from_diagonal(Vec3::splat(diag_scalar));
     let mut rhs = f * h + kv;
     if let Some(frag) = sys.fragment(i) {
@@ -431,149 +394,47 @@ struct ProductTask<'a> {
 
 /// Rows `first..` of `A input` for the system matrix `M - h² K - h D` (pinned rows zero, contact
 /// constraints filtered out when `contact` is not empty); `gas_scale` holds `h² P/V Σ g·input` per
-/// fragment ([`gas_scale`]).
-///
-/// The couplings of each row are summed by [`row_sum`], or by [`row_sum_avx2`] two at a time
-/// when the processor has AVX2 and FMA (checked at run time: the library is built for baseline
-/// x86-64). The two sum in different orders, so results differ between such machines in the
-/// last bits, never between thread counts on one machine.
+/// fragment ([`gas_scale`]). The couplings are summed eight rows at a time
+/// ([`for_each_row_sum`]).
 fn product_rows(
     sys: &System,
     contact: &[ContactFilter],
-    (coupling, neighbor): (&[Coupling], &[u32]),
+    (offsets, groups): (&[u32], &[CouplingGroup]),
     input: &[Vec3A],
     gas_scale: &[f32],
     task: &mut ProductTask,
-) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-        // SAFETY: the processor has the features the function is compiled for (checked above).
-        unsafe { product_rows_avx2(sys, contact, (coupling, neighbor), input, gas_scale, task) };
-        return;
-    }
-    product_rows_with(sys, contact, (coupling, neighbor), input, gas_scale, task, row_sum);
-}
-
-/// [`product_rows`] compiled for AVX2 and FMA.
-///
-/// # Safety
-/// The processor must have AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn product_rows_avx2(
-    sys: &System,
-    contact: &[ContactFilter],
-    coupling: (&[Coupling], &[u32]),
-    input: &[Vec3A],
-    gas_scale: &[f32],
-    task: &mut ProductTask,
-) {
-    product_rows_with(sys, contact, coupling, input, gas_scale, task, |c, n, input, xi| {
-        // SAFETY: this function runs only where AVX2 and FMA are available.
-        unsafe { row_sum_avx2(c, n, input, xi) }
-    });
-}
-
-/// The rows of [`product_rows`] with the couplings summed by `sum`.
-#[inline(always)]
-fn product_rows_with(
-    sys: &System,
-    contact: &[ContactFilter],
-    (coupling, neighbor): (&[Coupling], &[u32]),
-    input: &[Vec3A],
-    gas_scale: &[f32],
-    task: &mut ProductTask,
-    sum: impl Fn(&[Coupling], &[u32], &[Vec3A], Vec3A) -> Vec3A,
 ) {
     let model = sys.model;
-    let offsets = &model.springs.offsets;
-    let mut dot = 0.0f64;
-    for (k, o) in task.out.iter_mut().enumerate() {
-        let i = task.first + k;
-        if model.inv_mass[i] == 0.0 {
-            *o = Vec3A::ZERO;
-            continue;
+    let first = task.first;
+    let out = &mut *task.out;
+    for_each_row_sum(offsets, groups, input, first..first + out.len(), |i, sum| out[i - first] = sum);
+    // The rest of each row, with `Σ input·out` in four running sums (rows k mod 4, added in a
+    // fixed order: one chain of f64 additions made this loop as slow as the couplings' sums).
+    let rows = first..first + out.len();
+    let (mass, inv_mass, input_rows) = (&model.mass[rows.clone()], &model.inv_mass[rows.clone()], &input[rows.clone()]);
+    let fragment = sys.vertex_fragment.get(rows.clone()).unwrap_or(&[]);
+    let gradient = sys.gradient.get(rows.clone()).unwrap_or(&[]);
+    let contact = contact.get(rows).unwrap_or(&[]);
+    let mut dots = [0.0f64; 4];
+    for (k, o) in out.iter_mut().enumerate() {
+        let xi = input_rows[k];
+        let mut acc = xi * mass[k] + *o;
+        if let Some(&frag) = fragment.get(k) {
+            if frag != u32::MAX {
+                acc += Vec3A::from(gradient[k]) * gas_scale[frag as usize];
+            }
         }
-        let xi = input[i];
-        let (start, end) = (offsets[i] as usize, offsets[i + 1] as usize);
-        let mut acc = xi * model.mass[i] + sum(&coupling[start..end], &neighbor[start..end], input, xi);
-        if let Some(frag) = sys.fragment(i) {
-            acc += Vec3A::from(sys.gradient[i]) * gas_scale[frag];
-        }
-        if let Some(filter) = contact.get(i) {
+        if let Some(filter) = contact.get(k) {
             acc = filter.apply(acc);
         }
-        dot += xi.dot(acc) as f64;
+        if inv_mass[k] == 0.0 {
+            acc = Vec3A::ZERO;
+        }
+        dots[k % 4] += xi.dot(acc) as f64;
         *o = acc;
     }
+    let dot = (dots[0] + dots[1]) + (dots[2] + dots[3]);
     task.dot = dot;
-}
-
-/// `Σ B_c (xi - input[j_c])` over the couplings `B_c` of one row (their other ends `j_c`).
-#[inline(always)]
-fn row_sum(coupling: &[Coupling], neighbor: &[u32], input: &[Vec3A], xi: Vec3A) -> Vec3A {
-    let mut acc = Vec3A::ZERO;
-    for (c, &j) in coupling.iter().zip(neighbor) {
-        acc += c.apply(xi - input[j as usize]);
-    }
-    acc
-}
-
-/// [`row_sum`] two couplings at a time in 256-bit registers (each 128-bit half holds one
-/// coupling `(w, alpha)` and one difference `xi - input[j]`), with fused multiply-adds. On the
-/// issue-5 balloon (benches/body_balloon.rs, one thread, 10th-percentile step time, alternating
-/// runs) this and the gas corner records (`gas`) together took a step from 2.57-2.70 ms to
-/// 2.27-2.35 ms. Tried and not kept: two accumulators (one addition on the dependency chain per
-/// pair instead of two multiply-adds): no difference within the noise.
-///
-/// # Safety
-/// The processor must have AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-unsafe fn row_sum_avx2(coupling: &[Coupling], neighbor: &[u32], input: &[Vec3A], xi: Vec3A) -> Vec3A {
-    use std::arch::x86_64::*;
-    let count = coupling.len().min(neighbor.len());
-    // SAFETY (whole body): the intrinsics need AVX2 and FMA (the caller's contract); the loads
-    // read `coupling[k]` and `coupling[k + 1]` (k + 1 < count, 16 bytes each, contiguous) through
-    // a pointer of the slice; every `input` access is bounds-checked.
-    unsafe {
-        let x = __m128::from(xi);
-        let x2 = _mm256_set_m128(x, x);
-        // Zeroes the fourth lane of each half (Vec3A leaves it unspecified).
-        let mask = _mm256_castsi256_ps(_mm256_setr_epi32(-1, -1, -1, 0, -1, -1, -1, 0));
-        let base = coupling.as_ptr() as *const f32;
-        let mut acc = _mm256_setzero_ps();
-        let mut k = 0;
-        while k + 1 < count {
-            let c = _mm256_loadu_ps(base.add(4 * k));
-            let p = _mm256_set_m128(
-                __m128::from(input[neighbor[k + 1] as usize]),
-                __m128::from(input[neighbor[k] as usize]),
-            );
-            let d = _mm256_and_ps(_mm256_sub_ps(x2, p), mask);
-            let wd = _mm256_mul_ps(c, d);
-            let s = _mm256_hadd_ps(wd, wd);
-            let s = _mm256_hadd_ps(s, s);
-            let alpha = _mm256_permute_ps::<0xFF>(c);
-            acc = _mm256_fmadd_ps(d, alpha, acc);
-            acc = _mm256_fmadd_ps(_mm256_and_ps(c, mask), s, acc);
-            k += 2;
-        }
-        let mut sum = _mm_add_ps(_mm256_castps256_ps128(acc), _mm256_extractf128_ps::<1>(acc));
-        if k < count {
-            let c = _mm_loadu_ps(base.add(4 * k));
-            let mask = _mm256_castps256_ps128(mask);
-            let d = _mm_and_ps(_mm_sub_ps(x, __m128::from(input[neighbor[k] as usize])), mask);
-            let wd = _mm_mul_ps(c, d);
-            let s = _mm_hadd_ps(wd, wd);
-            let s = _mm_hadd_ps(s, s);
-            let alpha = _mm_permute_ps::<0xFF>(c);
-            sum = _mm_fmadd_ps(d, alpha, sum);
-            sum = _mm_fmadd_ps(_mm_and_ps(c, mask), s, sum);
-        }
-        Vec3A::from(sum)
-    }
 }
 
 /// `Σ g·value(i)` over the vertices `rows`, per gas fragment, into `out`.
@@ -688,7 +549,7 @@ fn direction_chunk(
 struct SolveInput<'a> {
     sys: &'a System<'a>,
     contact: &'a [ContactFilter],
-    coupling: (&'a [Coupling], &'a [u32]),
+    coupling: (&'a [u32], &'a [CouplingGroup]),
     rhs: &'a [Vec3A],
     inv_diag: &'a [Mat3A],
     any_contact: bool,
@@ -704,8 +565,8 @@ struct SolveInput<'a> {
 /// to exactly one member) of the arrays the pass updates, and reads rows of other chunks only of
 /// arrays that no member writes in that pass.
 struct Shared<'a> {
-    coupling: SharedSlice<'a, Coupling>,
-    neighbor: SharedSlice<'a, u32>,
+    coupling_offsets: &'a [u32],
+    couplings: SharedSlice<'a, CouplingGroup>,
     rhs: SharedSlice<'a, Vec3A>,
     inv_diag: SharedSlice<'a, Mat3A>,
     contact: SharedSlice<'a, ContactFilter>,
@@ -1077,8 +938,7 @@ pub(crate) fn substep(
         buffer.resize(n, Vec3A::ZERO);
     }
     s.inv_diag.resize(n, Mat3A::ZERO);
-    s.coupling.resize(model.springs.adjacency.len(), Coupling::default());
-    s.neighbor.resize(model.springs.adjacency.len(), 0);
+    s.couplings.layout(&model.springs.offsets);
     // Without wind the assembly adds gravity and the pressure per vertex (two serial passes
     // fewer); with wind the external forces are gathered here first.
     let wind = model.has_wind();
@@ -1148,8 +1008,8 @@ pub(crate) fn substep(
         None => (None, &mut [][..], &mut [][..]),
     };
     let shared = Shared {
-        coupling: SharedSlice::new(&mut s.coupling),
-        neighbor: SharedSlice::new(&mut s.neighbor),
+        coupling_offsets: &s.couplings.offsets,
+        couplings: SharedSlice::new(&mut s.couplings.groups),
         rhs: SharedSlice::new(&mut s.rhs),
         inv_diag: SharedSlice::new(&mut s.inv_diag),
         contact: SharedSlice::new(&mut s.contact),
@@ -1259,14 +1119,17 @@ pub(crate) fn substep(
             team.claim(chunks, |c| {
                 let rows = rows(c);
                 let (first, end) = (rows.start, rows.end);
-                let adjacency = model.springs.offsets[first] as usize..model.springs.offsets[end] as usize;
+                let groups = group_range(shared.coupling_offsets, first..end);
                 let has_contact = !obstacles.is_empty();
                 // SAFETY: this member's chunks of every array the assembly writes.
                 let task = unsafe {
                     AssemblyTask {
                         first,
-                        coupling: shared.coupling.part(adjacency.clone()),
-                        neighbor: shared.neighbor.part(adjacency),
+                        couplings: SliceRowsMut {
+                            offsets: shared.coupling_offsets,
+                            groups: shared.couplings.part(groups),
+                            first_row: first,
+                        },
                         rhs: shared.rhs.part(rows.clone()),
                         inv_diag: shared.inv_diag.part(rows.clone()),
                         dv: shared.dv.part(rows.clone()),
@@ -1301,7 +1164,7 @@ pub(crate) fn substep(
                     SolveInput {
                         sys: &sys,
                         contact: if any_contact { shared.contact.whole() } else { &[] },
-                        coupling: (shared.coupling.whole(), shared.neighbor.whole()),
+                        coupling: (shared.coupling_offsets, shared.couplings.whole()),
                         rhs: shared.rhs.whole(),
                         inv_diag: shared.inv_diag.whole(),
                         any_contact,
@@ -1383,42 +1246,3 @@ pub(crate) fn substep(
     (power * h as f64, iterations)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The AVX2 row sum (where the processor has it) agrees with the scalar one up to the
-    /// rounding of a different summation order, for odd and even coupling counts (the pairs and
-    /// the leftover single coupling).
-    #[test]
-    fn avx2_row_sum_agrees_with_the_scalar_one() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut unit = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
-        let input: Vec<Vec3A> = (0..64).map(|_| Vec3A::new(unit(), unit(), unit())).collect();
-        for count in [0usize, 1, 2, 5, 6, 13] {
-            let coupling: Vec<Coupling> = (0..count)
-                .map(|_| Coupling::new(Vec3A::new(unit(), unit(), unit()), unit().abs() * 10.0, unit().abs() * 100.0))
-                .collect();
-            let neighbor: Vec<u32> = (0..count).map(|k| ((k * 7 + 3) % input.len()) as u32).collect();
-            let xi = Vec3A::new(unit(), unit(), unit());
-            let scalar = row_sum(&coupling, &neighbor, &input, xi);
-            let magnitude: f32 =
-                coupling.iter().zip(&neighbor).map(|(c, &j)| c.apply(xi - input[j as usize]).length()).sum();
-            #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-                // SAFETY: the processor has AVX2 and FMA (checked just above).
-                let wide = unsafe { row_sum_avx2(&coupling, &neighbor, &input, xi) };
-                assert!((wide - scalar).length() <= 1e-5 * magnitude.max(1.0), "{count}: {wide} vs {scalar}");
-                assert!(count == 0 || magnitude > 1.0, "the test's sums are not trivial");
-            }
-            let expected: Vec3A =
-                coupling.iter().zip(&neighbor).fold(Vec3A::ZERO, |acc, (c, &j)| acc + c.apply(xi - input[j as usize]));
-            assert_eq!(scalar, expected);
-        }
-    }
-}

@@ -15,6 +15,7 @@
 
 mod cholesky;
 mod coarse;
+mod coupling_slices;
 mod core_block;
 mod crack;
 mod energy;
