@@ -22,11 +22,11 @@
 use glam::{Mat3A, Vec3, Vec3A};
 
 use super::coarse::{CoarseSpace, CoarseView};
-use super::coupling_slices::{Coupling, CouplingGroup, CouplingSlices, SLICE, SliceRowsMut, for_each_row_sum, group_range};
+use super::coupling_slices::{CouplingGroup, CouplingSlices, SLICE, SliceRowsMut, for_each_row_sum, group_range};
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::Gas;
 use super::obstacles::{Obstacle, resolve, touching};
-use super::springs::{is_degenerate, spring_block_coefficients};
+use super::spring_terms::{SpringInput, SpringTerms, spring_terms_range};
 use crate::parallel::{SharedSlice, Team, WorkerPool};
 
 /// How a vertex in contact with an obstacle is constrained inside the solve (Baraff and Witkin
@@ -292,48 +292,6 @@ fn start_vertex(
         *inv_diag -= outer(dn, dn / ndn);
     }
     (dv.into(), ContactFilter::Slide(normal, pushed.max(0.0)))
-}
-
-/// One spring's share of the assembly, seen from its first end (`Springs::ends[k][0]`): the
-/// spring and damping force on it, its `h² K v` term and the coupling block, plus `|K_s (L - L0)|`
-/// for the force scale. The second end takes the vectors negated (`u` and the velocity
-/// difference both flip sign, so they are exactly the negated values) and the same block, so
-/// each spring is computed once, not once per end.
-///
-/// 48 bytes (the force unaligned beside the stretch): the assembly gathers these per vertex in
-/// an order that jumps about the array, so their size is what that gather waits on.
-#[derive(Clone, Copy, Default)]
-struct SpringTerms {
-    kv: Vec3A,
-    coupling: Coupling,
-    force: Vec3,
-    stretch: f32,
-}
-
-/// The terms of spring `k` (SPEC 2.1 force and damping, the stiffness block of `springs`).
-fn spring_terms(sys: &System, k: usize) -> SpringTerms {
-    let model = sys.model;
-    let (ks, kd) = (model.settings.spring_stiffness, model.settings.spring_damping);
-    let (h, h2) = (sys.h, sys.h * sys.h);
-    let [i, j] = model.springs.ends[k];
-    let rest = model.springs.rest[k];
-    let d = Vec3A::from(sys.x[j as usize]) - Vec3A::from(sys.x[i as usize]);
-    let len = d.length();
-    if is_degenerate(len, rest) {
-        return SpringTerms::default();
-    }
-    let u = d * len.recip();
-    let dvel = Vec3A::from(sys.v[j as usize]) - Vec3A::from(sys.v[i as usize]);
-    let stretch = ks * (len - rest);
-    let along = u.dot(dvel);
-    let (a, b) = spring_block_coefficients(len, rest, ks);
-    let (alpha, beta) = (h2 * a, h2 * b + h * kd);
-    SpringTerms {
-        force: (u * (stretch + kd * along)).into(),
-        kv: (dvel * a + u * (b * along)) * h2,
-        coupling: Coupling::new(u, alpha, beta),
-        stretch: stretch.abs(),
-    }
 }
 
 /// Assembly of one vertex from its springs' terms: the right side `h f + h² K v`, the coupling
@@ -1089,6 +1047,15 @@ pub(crate) fn substep(
             let previous_dv = unsafe { previous.whole() };
             let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
             // The spring terms (chunks of springs), and `Σ g·v` per chunk of vertices, in one pass.
+            let spring_input = SpringInput {
+                ends: &model.springs.ends,
+                rest: &model.springs.rest,
+                x: sys.x,
+                v: sys.v,
+                stiffness: model.settings.spring_stiffness,
+                damping: model.settings.spring_damping,
+                h,
+            };
             let spring_chunks = model.springs.len().div_ceil(SPRING_CHUNK);
             let gas_chunks = if fragments > 0 { chunks } else { 0 };
             team.claim(spring_chunks + gas_chunks, |c| {
@@ -1097,9 +1064,7 @@ pub(crate) fn substep(
                     let first = range.start;
                     // SAFETY: this chunk of the terms, written by this member alone.
                     let terms = unsafe { shared.terms.part(range) };
-                    for (k, t) in terms.iter_mut().enumerate() {
-                        *t = spring_terms(&sys, first + k);
-                    }
+                    spring_terms_range(&spring_input, first, terms);
                 } else {
                     let c = c - spring_chunks;
                     // SAFETY: this chunk's sums, written by this member alone.
