@@ -674,12 +674,17 @@ impl Body {
                 })
                 .collect();
             crack::mark_broken(fracture, &topology, &edges);
+            trace_phase("cracks: mark", t);
+            let t = Instant::now();
             let mut vertices: Vec<u32> = pairs.iter().flatten().copied().collect();
             vertices.sort_unstable();
             vertices.dedup();
             let before = self.triangles.clone();
             if crack::split_fans(fracture, &topology, &mut self.triangles, &mut self.nodes, &vertices) > 0 {
+                trace_phase("cracks: split", t);
+                let t = Instant::now();
                 topology.update(&before, &self.triangles, self.nodes.len());
+                trace_phase("cracks: topology update", t);
             }
         }
         trace_phase("cracks", t);
