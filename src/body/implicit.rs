@@ -88,6 +88,9 @@ pub(crate) struct ImplicitScratch {
     /// length it was made (or tried) for.
     coarse: Option<CoarseSpace>,
     coarse_h: f32,
+    /// Whether the last substep left every position and velocity finite (checked in its last
+    /// pass, in parallel, so the step need not scan them again).
+    pub all_finite: bool,
 }
 
 impl ImplicitScratch {
@@ -564,6 +567,8 @@ struct ChunkSums {
     magnitude: Vec<f64>,
     rhs: Vec<f64>,
     contact: Vec<bool>,
+    /// Whether every position and velocity of the chunk is finite after the last pass.
+    finite: Vec<bool>,
     gas_v: Vec<f64>,
     /// `Σ (rhs - m Δv)`, `Σ m` and whether no vertex is pinned.
     momentum: Vec<(glam::DVec3, f64, bool)>,
@@ -581,6 +586,8 @@ impl ChunkSums {
         }
         self.contact.clear();
         self.contact.resize(chunks, false);
+        self.finite.clear();
+        self.finite.resize(chunks, false);
         self.gas_v.clear();
         self.gas_v.resize(chunks * fragments, 0.0);
         self.momentum.clear();
@@ -600,6 +607,7 @@ impl ChunkSums {
             + self.gas_six_v.capacity())
             * 8
             + self.contact.capacity()
+            + self.finite.capacity()
             + self.momentum.capacity() * std::mem::size_of::<(glam::DVec3, f64, bool)>()
     }
 }
@@ -994,6 +1002,7 @@ pub(crate) fn substep(
     let (gradient, gas_coef) = (SharedSlice::new(&mut s.gradient), SharedSlice::new(&mut s.gas_coef));
     let (xs, vs, previous) = (SharedSlice::new(x), SharedSlice::new(v), SharedSlice::new(&mut s.previous_dv));
     let momentum = SharedSlice::new(&mut s.sums.momentum);
+    let chunk_finite = SharedSlice::new(&mut s.sums.finite);
     let gas_six_v = SharedSlice::new(&mut s.sums.gas_six_v);
     let gas_lock = std::sync::RwLock::new(gas);
     // Gas gradient, assembly, solve and the update of x and v: one parallel region (see
@@ -1177,12 +1186,16 @@ pub(crate) fn substep(
             let rows = rows(c);
             let first = rows.start;
             // SAFETY: this member's chunks.
-            let (x, v, previous) = unsafe { (xs.part(rows.clone()), vs.part(rows.clone()), previous.part(rows)) };
+            let (x, v, previous, finite) = unsafe {
+                (xs.part(rows.clone()), vs.part(rows.clone()), previous.part(rows), chunk_finite.part(c..c + 1))
+            };
+            let mut all_finite = true;
             for k in 0..x.len() {
                 let i = first + k;
                 let dvi = dv[i] + correction;
                 previous[k] = dvi;
                 if model.inv_mass[i] == 0.0 {
+                    all_finite &= x[k].is_finite() && v[k].is_finite();
                     continue;
                 }
                 let v = &mut v[k];
@@ -1200,13 +1213,16 @@ pub(crate) fn substep(
                 if !obstacles.is_empty() {
                     resolve(&mut x[k], v, obstacles, restitution, friction);
                 }
+                all_finite &= x[k].is_finite() && v.is_finite();
             }
+            finite[0] = all_finite;
         });
         (iterations, any_contact)
     });
     if !any_contact {
         s.contact.clear();
     }
+    s.all_finite = s.sums.finite.iter().all(|&f| f);
     s.coarse = coarse;
     (power * h as f64, iterations)
 }

@@ -448,6 +448,11 @@ impl Body {
             work += w;
             iterations += it as u64;
             clamped |= self.gas.as_ref().is_some_and(|g| g.clamped);
+            // The implicit integrator checks this in its last pass; the others are scanned here.
+            let checked = matches!(&self.scratch, Scratch::Implicit(s) if s.all_finite);
+            if checked {
+                continue;
+            }
             if let Some(i) = self.nodes.x.iter().zip(&self.nodes.v).position(|(x, v)| !x.is_finite() || !v.is_finite())
             {
                 diverged = Some(format!("vertex {i} reached a NaN or infinite position or velocity"));
