@@ -354,10 +354,7 @@ mod tests {
         }
         let mut slices = CouplingSlices::default();
         // Garbage left in the groups from an earlier layout must not matter.
-        slices.groups = vec![
-            CouplingGroup { w: [[7.0; SLICE]; 3], alpha: [5.0; SLICE], other: [3; SLICE] };
-            400
-        ];
+        slices.groups = vec![CouplingGroup { w: [[7.0; SLICE]; 3], alpha: [5.0; SLICE], other: [3; SLICE] }; 400];
         slices.layout(&row_offsets);
         {
             let mut view = SliceRowsMut { offsets: &slices.offsets, groups: &mut slices.groups, first_row: 0 };

@@ -1226,4 +1226,3 @@ pub(crate) fn substep(
     s.coarse = coarse;
     (power * h as f64, iterations)
 }
-

@@ -15,8 +15,8 @@
 
 mod cholesky;
 mod coarse;
-mod coupling_slices;
 mod core_block;
+mod coupling_slices;
 mod crack;
 mod energy;
 mod explicit;

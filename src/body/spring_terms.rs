@@ -134,7 +134,12 @@ unsafe fn spring_terms_avx2(input: &SpringInput, first: usize, out: &mut [Spring
             let j: [u32; 8] = std::array::from_fn(|l| ends[l][1]);
             // SAFETY: AVX2 (this function's contract).
             unsafe {
-                match (load_points(input.x, i), load_points(input.x, j), load_points(input.v, i), load_points(input.v, j)) {
+                match (
+                    load_points(input.x, i),
+                    load_points(input.x, j),
+                    load_points(input.v, i),
+                    load_points(input.v, j),
+                ) {
                     (Some(xi), Some(xj), Some(vi), Some(vj)) => Some((xi, xj, vi, vj)),
                     _ => None,
                 }
@@ -163,8 +168,7 @@ unsafe fn spring_terms_avx2(input: &SpringInput, first: usize, out: &mut [Spring
         let (wx, wy, wz) = (_mm256_sub_ps(vj.0, vi.0), _mm256_sub_ps(vj.1, vi.1), _mm256_sub_ps(vj.2, vi.2));
         let ksv = _mm256_set1_ps(ks);
         let stretch = _mm256_mul_ps(ksv, _mm256_sub_ps(len, rest));
-        let along =
-            _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ux, wx), _mm256_mul_ps(uy, wy)), _mm256_mul_ps(uz, wz));
+        let along = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ux, wx), _mm256_mul_ps(uy, wy)), _mm256_mul_ps(uz, wz));
         // a = K_s max(1 - L0/L, 0), b = K_s - a (`spring_block_coefficients`).
         let a = _mm256_mul_ps(
             ksv,
@@ -177,7 +181,8 @@ unsafe fn spring_terms_avx2(input: &SpringInput, first: usize, out: &mut [Spring
         let root = _mm256_sqrt_ps(_mm256_max_ps(beta, _mm256_setzero_ps()));
         let push = _mm256_add_ps(stretch, _mm256_mul_ps(_mm256_set1_ps(kd), along));
         let b_along = _mm256_mul_ps(b, along);
-        let kv = |w: __m256, u: __m256| _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(w, a), _mm256_mul_ps(u, b_along)), h2v);
+        let kv =
+            |w: __m256, u: __m256| _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(w, a), _mm256_mul_ps(u, b_along)), h2v);
         let lanes = [
             _mm256_mul_ps(ux, push),
             _mm256_mul_ps(uy, push),
@@ -237,15 +242,16 @@ mod tests {
         for k in 0..203u32 {
             let i = (k * 7) % n as u32;
             let j = match k % 17 {
-                0 => i,                // degenerate: both ends at one point
-                1 => n as u32 - 1,     // the last vertex
+                0 => i,            // degenerate: both ends at one point
+                1 => n as u32 - 1, // the last vertex
                 _ => (k * 13 + 1) % n as u32,
             };
             ends.push([i.min(j), i.max(j)]);
             let length = (x[j as usize] - x[i as usize]).length();
             rest.push(length * (0.5 + unit().abs()));
         }
-        let input = SpringInput { ends: &ends, rest: &rest, x: &x, v: &v, stiffness: 1234.5, damping: 6.7, h: 1.0 / 60.0 };
+        let input =
+            SpringInput { ends: &ends, rest: &rest, x: &x, v: &v, stiffness: 1234.5, damping: 6.7, h: 1.0 / 60.0 };
         let expected: Vec<SpringTerms> = (0..ends.len()).map(|k| spring_terms(&input, k)).collect();
         assert!(expected.iter().any(|t| *t == SpringTerms::default()), "a degenerate spring is in the test");
         assert!(expected.iter().filter(|t| t.coupling.w().length() > 0.0).count() > 150);
