@@ -61,14 +61,19 @@ pub(crate) struct CoarseView<'a> {
 
 impl CoarseView<'_> {
     /// `out[k - rows.start]` = the sum of `r` over the aggregate of factor row k, for the rows
-    /// `rows` (summed in vertex order).
+    /// `rows` (in vertex order, alternate members in two running sums, so that each addition
+    /// does not wait for the one before; the order is fixed by the aggregate).
     pub fn restrict(&self, rows: std::ops::Range<usize>, r: &[Vec3A], out: &mut [Vec3A]) {
         for (o, k) in out.iter_mut().zip(rows) {
-            let mut sum = Vec3A::ZERO;
-            for &i in &self.members[self.member_offsets[k] as usize..self.member_offsets[k + 1] as usize] {
-                sum += r[i as usize];
+            let members = &self.members[self.member_offsets[k] as usize..self.member_offsets[k + 1] as usize];
+            let (mut even, mut odd) = (Vec3A::ZERO, Vec3A::ZERO);
+            let pairs = members.chunks_exact(2);
+            let last = pairs.remainder().first().map_or(Vec3A::ZERO, |&i| r[i as usize]);
+            for pair in pairs {
+                even += r[pair[0] as usize];
+                odd += r[pair[1] as usize];
             }
-            *o = sum;
+            *o = (even + last) + odd;
         }
     }
 
