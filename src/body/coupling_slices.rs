@@ -115,7 +115,12 @@ fn pad(group: &mut CouplingGroup, lane: usize, row: usize) {
 /// The groups that hold rows `rows` (`rows.start` a multiple of [`SLICE`], `rows.end` too or the
 /// last row).
 pub(crate) fn group_range(offsets: &[u32], rows: Range<usize>) -> Range<usize> {
-    debug_assert_eq!(rows.start % SLICE, 0);
+    // Whole slices only: a range ending inside a slice would share its groups with the next.
+    let slices = offsets.len() - 1;
+    assert!(
+        rows.start % SLICE == 0 && (rows.end % SLICE == 0 || rows.end.div_ceil(SLICE) == slices),
+        "rows {rows:?} are not whole slices of {slices}"
+    );
     offsets[rows.start / SLICE] as usize..offsets[rows.end.div_ceil(SLICE)] as usize
 }
 
@@ -174,8 +179,8 @@ impl SliceRowsMut<'_> {
 /// Calls `f(row, Σ_c B_c (x_row - input[other_c]))` for each row of `rows` (`rows.start` a
 /// multiple of [`SLICE`]), summing over its couplings `B_c` in `groups` (all of them) eight rows
 /// at a time: with AVX2 and FMA when the processor has them (checked at run time: the library
-/// is built for baseline x86-64), else in the same order without fused multiply-adds (so the
-/// two differ in the last bits, never between thread counts on one machine).
+/// is built for baseline x86-64), else in plain Rust (the two round differently, so they differ
+/// in the last bits, never between thread counts on one machine).
 ///
 /// Panics if an other end is not a row of `input`.
 #[inline]

@@ -13,7 +13,7 @@ pub(crate) fn kinetic(mass: &[f32], v: &[Vec3]) -> f64 {
 }
 
 /// Springs per parallel chunk (fixed, so the sums do not depend on the thread count).
-const SPRING_CHUNK: usize = 4096;
+pub(crate) const SPRING_CHUNK: usize = 4096;
 
 /// Spring energy (J) and the largest spring strain (0 when none is stretched) of spring chunk
 /// `c`: the end-of-step stats need both (SPEC 2.5), and each needs every spring's length.
@@ -29,7 +29,7 @@ fn spring_chunk(springs: &Springs, x: &[Vec3], ks: f32, c: usize) -> (f64, f32) 
 }
 
 /// Vertices per chunk of [`state_energies`].
-const VERTEX_CHUNK: usize = 4096;
+pub(crate) const VERTEX_CHUNK: usize = 4096;
 
 /// The gas of a state for [`state_energies`]: the gas, its fragments' origins
 /// ([`Gas::origins`]), the triangles and their fragments.

@@ -397,11 +397,19 @@ impl Gas {
                 open[f] += 0.5 * (pa - c).cross(pb - c).length();
             }
         }
-        self.clamped = false;
         for f in 0..n {
-            let volume = six_v[f] / 6.0;
-            self.volume[f] = volume;
+            self.volume[f] = six_v[f] / 6.0;
             self.open_area[f] = open[f];
+        }
+        self.refresh_pressures();
+    }
+
+    /// The pressures (and `clamped`) from the last measured volumes and the current nRT (which a
+    /// leak changes after the measurement).
+    pub fn refresh_pressures(&mut self) {
+        self.clamped = false;
+        for f in 0..self.fragment_count() {
+            let volume = self.volume[f];
             if self.n_rt[f] <= 0.0 {
                 self.pressure[f] = 0.0;
                 continue;

@@ -23,6 +23,7 @@ use glam::{Mat3A, Vec3, Vec3A};
 
 use super::coarse::{CoarseSpace, CoarseView};
 use super::coupling_slices::{CouplingGroup, CouplingSlices, SLICE, SliceRowsMut, for_each_row_sum, group_range};
+use super::energy;
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::Gas;
 use super::obstacles::{Obstacle, resolve, touching};
@@ -91,9 +92,50 @@ pub(crate) struct ImplicitScratch {
     /// Whether the last substep left every position and velocity finite (checked in its last
     /// pass, in parallel, so the step need not scan them again).
     pub all_finite: bool,
+    /// What the last substep made at its end for the next one (see [`Prepared`]), with the
+    /// chunks' `Σ g·v` of that state; None when nothing is prepared.
+    prepared: Option<Prepared>,
+    prepared_gas_v: Vec<f64>,
+    /// The energies of the state the last substep ended in (from the prepared terms).
+    pub end_energies: Option<EndEnergies>,
+}
+
+/// At the end of a substep (without wind) the team measures the state it ended in, as the next
+/// substep would at its start: the gas gradient, volumes and pressures, the spring terms and
+/// `Σ g·v`. The next substep starts from them instead of measuring again, and the step takes its
+/// end-of-step energies from them (the spring extensions, the gas volumes) instead of a pass of
+/// its own over the springs and faces at the same positions. Valid while nothing changes the
+/// state in between: the step forgets it when anything did ([`ImplicitScratch::forget_prepared`]).
+#[derive(Clone, Copy, PartialEq)]
+struct Prepared {
+    h: f32,
+    vertices: usize,
+    springs: usize,
+}
+
+/// Kinetic, spring and gravitational energy (J) and the largest spring strain of a state, summed
+/// in the same chunks and order as `energy::state_energies` (the same bits).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct EndEnergies {
+    pub kinetic: f64,
+    pub spring: f64,
+    pub gravity: f64,
+    pub max_strain: f32,
 }
 
 impl ImplicitScratch {
+    /// Whether the last substep prepared the next.
+    #[cfg(test)]
+    pub fn has_prepared(&self) -> bool {
+        self.prepared.is_some()
+    }
+
+    /// Forgets what the last substep prepared for the next (the state changed since).
+    pub fn forget_prepared(&mut self) {
+        self.prepared = None;
+        self.end_energies = None;
+    }
+
     /// Keeps the warm start across a topology change: survivors keep their index, and a vertex
     /// appended by a split starts from the Δv of the input vertex it was copied from (`origin`);
     /// without this every crack would restart the solve from the free-fall guess.
@@ -127,6 +169,7 @@ impl ImplicitScratch {
             + self.spring_terms.capacity() * std::mem::size_of::<SpringTerms>()
             + (self.gas_coef.capacity() + self.gas_dot.capacity() + self.gas_partial.capacity()) * 8
             + self.sums.memory_bytes()
+            + self.prepared_gas_v.capacity() * 8
             + self.inv_diag.capacity() * std::mem::size_of::<Mat3A>()
             + self.coarse.as_ref().map_or(0, CoarseSpace::memory_bytes)
     }
@@ -326,7 +369,7 @@ fn assemble_vertex(
         let w = t.coupling.w();
         diag += outer(w, w);
         diag_scalar += t.coupling.0.w;
-        magnitude += t.stretch;
+        magnitude += (model.settings.spring_stiffness * t.extension).abs();
     }
     couplings.finish_row(i, around.len());
     diag += Mat3A::from_diagonal(Vec3::splat(diag_scalar));
@@ -398,13 +441,19 @@ fn product_rows(
     task.dot = dot;
 }
 
-/// `Σ g·value(i)` over the vertices `rows`, per gas fragment, into `out`.
-fn gas_dots_range(sys: &System, rows: std::ops::Range<usize>, value: impl Fn(usize) -> Vec3A, out: &mut [f64]) {
+/// `Σ g·value(i)` over the vertices `rows`, per gas fragment (`vertex_fragment`, `gradient`),
+/// into `out`.
+fn gas_dots_range(
+    (vertex_fragment, gradient): (&[u32], &[Vec3]),
+    rows: std::ops::Range<usize>,
+    value: impl Fn(usize) -> Vec3A,
+    out: &mut [f64],
+) {
     out.fill(0.0);
     let mut run = GasRun::default();
     for i in rows {
-        if let Some(frag) = sys.fragment(i) {
-            run.add(out, frag, Vec3A::from(sys.gradient[i]).dot(value(i)) as f64);
+        if let Some(&frag) = vertex_fragment.get(i).filter(|&&f| f != u32::MAX) {
+            run.add(out, frag as usize, Vec3A::from(gradient[i]).dot(value(i)) as f64);
         }
     }
     run.flush(out);
@@ -569,6 +618,10 @@ struct ChunkSums {
     contact: Vec<bool>,
     /// Whether every position and velocity of the chunk is finite after the last pass.
     finite: Vec<bool>,
+    /// Per chunk of `energy::SPRING_CHUNK` springs its energy and largest strain, per chunk of
+    /// `energy::VERTEX_CHUNK` vertices its kinetic and gravitational energy (the end energies).
+    end_springs: Vec<(f64, f32)>,
+    end_vertices: Vec<(f64, f64)>,
     gas_v: Vec<f64>,
     /// `Σ (rhs - m Δv)`, `Σ m` and whether no vertex is pinned.
     momentum: Vec<(glam::DVec3, f64, bool)>,
@@ -608,6 +661,8 @@ impl ChunkSums {
             * 8
             + self.contact.capacity()
             + self.finite.capacity()
+            + self.end_springs.capacity() * 16
+            + self.end_vertices.capacity() * 16
             + self.momentum.capacity() * std::mem::size_of::<(glam::DVec3, f64, bool)>()
     }
 }
@@ -900,6 +955,8 @@ pub(crate) fn substep(
     s: &mut ImplicitScratch,
 ) -> (f64, usize) {
     let n = x.len();
+    // Set again by the last pass (a substep that does not reach it leaves the step to check).
+    s.all_finite = false;
     for buffer in [&mut s.rhs, &mut s.dv, &mut s.r, &mut s.z, &mut s.p, &mut s.ap] {
         buffer.resize(n, Vec3A::ZERO);
     }
@@ -927,6 +984,12 @@ pub(crate) fn substep(
     // `prepare_gradient` here), with wind here with the external forces.
     let mut gas_origin = Vec::new();
     let gradient_in_team = gas.is_some() && !wind;
+    // What the last substep prepared for this one (see `Prepared`), if it still fits; this one
+    // prepares the next unless there is wind (whose forces are measured here each time).
+    let now = Prepared { h, vertices: n, springs: model.springs.len() };
+    let reuse = !wind && s.prepared.take() == Some(now) && s.spring_terms.len() == now.springs;
+    s.end_energies = None;
+    let prepare = !wind;
     if let Some(gas) = gas.as_deref_mut() {
         s.gradient.resize(n, Vec3::ZERO);
         let frags = gas.fragment_count();
@@ -934,6 +997,10 @@ pub(crate) fn substep(
         s.gas_coef.resize(frags, 0.0);
         if wind {
             add_gas_forces_parallel(model, pool, gas, x, &mut s.gradient, &mut s.force);
+            gas_coefficients(gas, &mut s.gas_coef);
+        } else if reuse {
+            // Measured at the end of the last substep; a leak may have changed nRT since.
+            gas.refresh_pressures();
             gas_coefficients(gas, &mut s.gas_coef);
         } else {
             gas_origin = gas.prepare_gradient(x, model.triangles, model.face_fragment, n);
@@ -959,6 +1026,15 @@ pub(crate) fn substep(
     let chunks = n.div_ceil(CHUNK);
     s.gas_partial.resize(chunks * fragments, 0.0);
     s.sums.resize(chunks, fragments);
+    if reuse {
+        s.sums.gas_v.copy_from_slice(&s.prepared_gas_v);
+    }
+    if prepare {
+        s.sums.end_springs.clear();
+        s.sums.end_springs.resize(model.springs.len().div_ceil(energy::SPRING_CHUNK), (0.0, 0.0));
+        s.sums.end_vertices.clear();
+        s.sums.end_vertices.resize(n.div_ceil(energy::VERTEX_CHUNK), (0.0, 0.0));
+    }
     // The coarse level: made once (again only if the substep length changes; after a topology
     // change it is extended, not remade, so a cracking step costs no factorization).
     if s.coarse_h != h {
@@ -1004,42 +1080,81 @@ pub(crate) fn substep(
     let momentum = SharedSlice::new(&mut s.sums.momentum);
     let chunk_finite = SharedSlice::new(&mut s.sums.finite);
     let gas_six_v = SharedSlice::new(&mut s.sums.gas_six_v);
+    let (end_springs, end_vertices) =
+        (SharedSlice::new(&mut s.sums.end_springs), SharedSlice::new(&mut s.sums.end_vertices));
     let gas_lock = std::sync::RwLock::new(gas);
+    // The gas's origins at the end of the substep (made by member 0 for the prepared gradient).
+    let end_origin = std::sync::RwLock::new(Vec::new());
     // Gas gradient, assembly, solve and the update of x and v: one parallel region (see
     // `Shared::solve`).
     let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
-    let (iterations, any_contact) = pool.team(|team| {
-        if gradient_in_team {
-            let fragments = fragments.max(1);
-            {
-                let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
-                if let Some(gas) = guard.as_deref() {
-                    team.claim(chunks, |c| {
-                        // SAFETY: this member's chunks of the gradient and of the sums; x is
-                        // written by nobody.
-                        let (out, six_v, x) = unsafe {
-                            (gradient.part(rows(c)), gas_six_v.part(c * fragments..(c + 1) * fragments), xs.whole())
-                        };
-                        gas.gradient_rows(x, &gas_origin, c * CHUNK, out, six_v);
-                    });
-                }
+    // The gas gradient, volumes and pressures at the current x (after `prepare_gradient` or
+    // `Gas::origins` for `origin`), and the gas coefficients.
+    let gradient_pass = |team: &Team, origin: &[glam::DVec3]| {
+        let fragments = fragments.max(1);
+        {
+            let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+            if let Some(gas) = guard.as_deref() {
+                team.claim(chunks, |c| {
+                    // SAFETY: this member's chunks of the gradient and of the sums; x is
+                    // written by nobody.
+                    let (out, six_v, x) = unsafe {
+                        (gradient.part(rows(c)), gas_six_v.part(c * fragments..(c + 1) * fragments), xs.whole())
+                    };
+                    gas.gradient_rows(x, origin, c * CHUNK, out, six_v);
+                });
             }
-            team.barrier();
-            if team.index() == 0 {
-                let mut guard = gas_lock.write().unwrap_or_else(|e| e.into_inner());
-                if let Some(gas) = guard.as_deref_mut() {
-                    // SAFETY: member 0 alone works in this pass.
-                    unsafe {
-                        gas.finish_gradient(xs.whole(), &gas_origin, gas_six_v.whole(), gradient.part(0..n));
-                        gas_coefficients(gas, gas_coef.part(0..gas_coef.len()));
-                    }
-                }
-            }
-            team.barrier();
         }
-        let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
-        let gas = gas_guard.as_deref();
+        team.barrier();
+        if team.index() == 0 {
+            let mut guard = gas_lock.write().unwrap_or_else(|e| e.into_inner());
+            if let Some(gas) = guard.as_deref_mut() {
+                // SAFETY: member 0 alone works in this pass.
+                unsafe {
+                    gas.finish_gradient(xs.whole(), origin, gas_six_v.whole(), gradient.part(0..n));
+                    gas_coefficients(gas, gas_coef.part(0..gas_coef.len()));
+                }
+            }
+        }
+        team.barrier();
+    };
+    // The spring terms (chunks of springs), and `Σ g·v` per chunk of vertices, in one pass, at
+    // the state (x, v) with the gas fragments and gradient `gas_state`.
+    let terms_pass = |team: &Team, x: &[Vec3], v: &[Vec3], gas_state: (&[u32], &[Vec3])| {
+        let spring_input = SpringInput {
+            ends: &model.springs.ends,
+            rest: &model.springs.rest,
+            x,
+            v,
+            stiffness: model.settings.spring_stiffness,
+            damping: model.settings.spring_damping,
+            h,
+        };
+        let spring_chunks = model.springs.len().div_ceil(SPRING_CHUNK);
+        let gas_chunks = if fragments > 0 { chunks } else { 0 };
+        team.claim(spring_chunks + gas_chunks, |c| {
+            if c < spring_chunks {
+                let range = c * SPRING_CHUNK..((c + 1) * SPRING_CHUNK).min(model.springs.len());
+                let first = range.start;
+                // SAFETY: this chunk of the terms, written by this member alone.
+                let terms = unsafe { shared.terms.part(range) };
+                spring_terms_range(&spring_input, first, terms);
+            } else {
+                let c = c - spring_chunks;
+                // SAFETY: this chunk's sums, written by this member alone.
+                let out = unsafe { shared.gas_v.part(c * fragments..(c + 1) * fragments) };
+                gas_dots_range(gas_state, rows(c), |i| Vec3A::from(v[i]), out);
+            }
+        });
+        team.barrier();
+    };
+    let (iterations, any_contact) = pool.team(|team| {
+        if gradient_in_team && !reuse {
+            gradient_pass(team, &gas_origin);
+        }
         let (iterations, any_contact) = {
+            let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+            let gas = gas_guard.as_deref();
             // SAFETY: nobody writes x, v or the warm start until the last pass below, after a
             // barrier and after the last use of these; nobody writes the gradient and the gas
             // coefficients from here on.
@@ -1055,33 +1170,9 @@ pub(crate) fn substep(
             };
             let previous_dv = unsafe { previous.whole() };
             let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
-            // The spring terms (chunks of springs), and `Σ g·v` per chunk of vertices, in one pass.
-            let spring_input = SpringInput {
-                ends: &model.springs.ends,
-                rest: &model.springs.rest,
-                x: sys.x,
-                v: sys.v,
-                stiffness: model.settings.spring_stiffness,
-                damping: model.settings.spring_damping,
-                h,
-            };
-            let spring_chunks = model.springs.len().div_ceil(SPRING_CHUNK);
-            let gas_chunks = if fragments > 0 { chunks } else { 0 };
-            team.claim(spring_chunks + gas_chunks, |c| {
-                if c < spring_chunks {
-                    let range = c * SPRING_CHUNK..((c + 1) * SPRING_CHUNK).min(model.springs.len());
-                    let first = range.start;
-                    // SAFETY: this chunk of the terms, written by this member alone.
-                    let terms = unsafe { shared.terms.part(range) };
-                    spring_terms_range(&spring_input, first, terms);
-                } else {
-                    let c = c - spring_chunks;
-                    // SAFETY: this chunk's sums, written by this member alone.
-                    let out = unsafe { shared.gas_v.part(gas_rows(c)) };
-                    gas_dots_range(&sys, rows(c), |i| Vec3A::from(sys.v[i]), out);
-                }
-            });
-            team.barrier();
+            if !reuse {
+                terms_pass(team, sys.x, sys.v, (sys.vertex_fragment, sys.gradient));
+            }
             let mut gas_dot_v = vec![0.0f64; fragments];
             // SAFETY: nobody writes the sums or the terms in this pass.
             let (gas_v, terms) = unsafe { (shared.gas_v.whole(), shared.terms.whole()) };
@@ -1217,12 +1308,75 @@ pub(crate) fn substep(
             }
             finite[0] = all_finite;
         });
+        if prepare {
+            team.barrier();
+            // SAFETY: from here on nobody writes x or v.
+            let (x, v) = unsafe { (xs.whole(), vs.whole()) };
+            if gradient_in_team {
+                if team.index() == 0 {
+                    let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+                    let origin = guard.as_deref().map(|gas| gas.origins(x)).unwrap_or_default();
+                    *end_origin.write().unwrap_or_else(|e| e.into_inner()) = origin;
+                }
+                team.barrier();
+                let origin = end_origin.read().unwrap_or_else(|e| e.into_inner()).clone();
+                gradient_pass(team, &origin);
+            }
+            {
+                let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+                let vertex_fragment = guard.as_deref().map_or(&[][..], |g| &g.vertex_fragment);
+                // SAFETY: the gradient was finished before the barrier ending `gradient_pass`;
+                // nobody writes it from here on.
+                terms_pass(team, x, v, (vertex_fragment, unsafe { gradient.whole() }));
+            }
+            // The energies of this state, in the chunks and order of `energy::state_energies`.
+            let (ks, g) = (model.settings.spring_stiffness, model.settings.gravity);
+            let spring_chunks = model.springs.len().div_ceil(energy::SPRING_CHUNK);
+            let vertex_chunks = n.div_ceil(energy::VERTEX_CHUNK);
+            // SAFETY: nobody writes the terms after `terms_pass`.
+            let terms = unsafe { shared.terms.whole() };
+            team.claim(spring_chunks + vertex_chunks, |c| {
+                if c < spring_chunks {
+                    let range = c * energy::SPRING_CHUNK..((c + 1) * energy::SPRING_CHUNK).min(model.springs.len());
+                    let (mut spring, mut strain) = (0.0f64, 0.0f32);
+                    for (t, &rest) in terms[range.clone()].iter().zip(&model.springs.rest[range]) {
+                        // `springs::spring_energy` and `spring_strain` of the same extension.
+                        let stretch = t.extension as f64;
+                        spring += 0.5 * ks as f64 * stretch * stretch;
+                        strain = strain.max(t.extension / rest);
+                    }
+                    // SAFETY: this chunk's slot, written by this member alone.
+                    unsafe { end_springs.part(c..c + 1)[0] = (spring, strain) };
+                } else {
+                    let c = c - spring_chunks;
+                    let range = c * energy::VERTEX_CHUNK..((c + 1) * energy::VERTEX_CHUNK).min(n);
+                    let kinetic = energy::kinetic(&model.mass[range.clone()], &v[range.clone()]);
+                    let gravity = energy::gravity(&model.mass[range.clone()], &x[range], g);
+                    // SAFETY: this chunk's slot, written by this member alone.
+                    unsafe { end_vertices.part(c..c + 1)[0] = (kinetic, gravity) };
+                }
+            });
+        }
         (iterations, any_contact)
     });
     if !any_contact {
         s.contact.clear();
     }
     s.all_finite = s.sums.finite.iter().all(|&f| f);
+    if prepare {
+        s.prepared = Some(now);
+        s.prepared_gas_v.clone_from(&s.sums.gas_v);
+        let (mut kinetic, mut spring, mut gravity, mut max_strain) = (0.0, 0.0, 0.0, 0.0f32);
+        for &(e, strain) in &s.sums.end_springs {
+            spring += e;
+            max_strain = max_strain.max(strain);
+        }
+        for &(k, g) in &s.sums.end_vertices {
+            kinetic += k;
+            gravity += g;
+        }
+        s.end_energies = Some(EndEnergies { kinetic, spring, gravity, max_strain });
+    }
     s.coarse = coarse;
     (power * h as f64, iterations)
 }

@@ -341,6 +341,14 @@ impl Body {
         }
         std::mem::swap(&mut self.nodes.x, &mut self.saved_x);
         std::mem::swap(&mut self.nodes.v, &mut self.saved_v);
+        // The forces measured the gas at the saved positions: measure it again at the current
+        // ones, and what the implicit integrator prepared there no longer holds.
+        if let Some(gas) = self.gas.as_mut() {
+            gas.measure(&self.nodes.x, &self.triangles, &self.face_fragment);
+        }
+        if let Scratch::Implicit(s) = &mut self.scratch {
+            s.forget_prepared();
+        }
         f.iter()
             .zip(&self.nodes.inv_mass)
             .map(|(fi, &w)| 0.5 * (h as f64 * fi.length() as f64).powi(2) * w as f64)
@@ -433,6 +441,13 @@ impl Body {
         let h = self.settings.time_step / substeps as f32;
         self.saved_x.clone_from(&self.nodes.x);
         self.saved_v.clone_from(&self.nodes.v);
+        // The energies of the last step's end hold until something changes the state (a pin, an
+        // impulse, a rolled-back step); so does what the implicit integrator prepared with them.
+        if self.energy_now.is_none() {
+            if let Scratch::Implicit(s) = &mut self.scratch {
+                s.forget_prepared();
+            }
+        }
         let before = match self.energy_now.take() {
             Some(energies) => energies,
             None => self.energy_parts(),
@@ -444,6 +459,9 @@ impl Body {
         let mut diverged = None;
         let mut after = before;
         for _ in 0..substeps {
+            // The gas measured at the start of the substep (the implicit integrator measures the
+            // state it ends in, for the next one), and below at its end.
+            clamped |= self.gas.as_ref().is_some_and(|g| g.clamped);
             let (w, it) = self.substep(h);
             work += w;
             iterations += it as u64;
@@ -464,7 +482,22 @@ impl Body {
             // energy at the start, what the gas and gravity released, and the external work.
             // (XPBD and the implicit solver may leave spring energy unconverged; that is not
             // divergence, so the test is on kinetic energy.)
-            after = self.energy_parts();
+            // The implicit integrator measured the end state already (its spring extensions, gas
+            // volumes and pressures at these positions); the others are measured here.
+            let prepared = match &mut self.scratch {
+                Scratch::Implicit(s) => s.end_energies.take(),
+                _ => None,
+            };
+            after = match prepared {
+                Some(e) => EnergyParts {
+                    kinetic: e.kinetic,
+                    spring: e.spring,
+                    gravity: e.gravity,
+                    gas: self.gas.as_ref().map_or(0.0, |g| g.energy()),
+                    max_strain: e.max_strain as f64,
+                },
+                None => self.energy_parts(),
+            };
             let available = before.kinetic
                 + before.spring
                 + (before.gas - after.gas).max(0.0)
@@ -497,6 +530,9 @@ impl Body {
         if let Some(what) = diverged {
             std::mem::swap(&mut self.nodes.x, &mut self.saved_x);
             std::mem::swap(&mut self.nodes.v, &mut self.saved_v);
+            if let Scratch::Implicit(s) = &mut self.scratch {
+                s.forget_prepared();
+            }
             if let Some(gas) = self.gas.as_mut() {
                 gas.measure(&self.nodes.x, &self.triangles, &self.face_fragment);
             }
@@ -664,6 +700,9 @@ impl Body {
     /// that changed), never built again from scratch.
     fn change_topology(&mut self, pairs: &[[u32; 2]], cores: &[u32]) -> u64 {
         let n = self.nodes.len();
+        if let Scratch::Implicit(s) = &mut self.scratch {
+            s.forget_prepared();
+        }
         let t = Instant::now();
         let fracture = self.fracture.get_or_insert_with(|| Fracture::new(n, self.triangles.len()));
         let old_face_fragment = std::mem::take(&mut self.face_fragment);
@@ -826,5 +865,87 @@ impl Body {
     /// Number of worker threads.
     pub fn threads(&self) -> usize {
         self.pool.threads()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sphere of radius 1 made from an octahedron split `levels` times (closed, outward).
+    fn sphere(levels: u32) -> TriMesh {
+        let mut p = vec![Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z];
+        let mut t: Vec<[u32; 3]> =
+            vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
+        for _ in 0..levels {
+            let mut middle = std::collections::HashMap::new();
+            let mut mid = |a: u32, b: u32, p: &mut Vec<Vec3>| {
+                *middle.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                    p.push(((p[a as usize] + p[b as usize]) * 0.5).normalize());
+                    p.len() as u32 - 1
+                })
+            };
+            let mut next = Vec::new();
+            for [a, b, c] in t {
+                let (ab, bc, ca) = (mid(a, b, &mut p), mid(b, c, &mut p), mid(c, a, &mut p));
+                next.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
+            }
+            t = next;
+        }
+        TriMesh::new(p, t).unwrap()
+    }
+
+    /// A gas ball dropped on the ground with the implicit integrator (which prepares each next
+    /// step at the end of the last).
+    fn ball(threads: u32) -> Body {
+        let mesh = sphere(3);
+        let topology = Topology::build(mesh.triangles(), mesh.positions().len());
+        let settings = BodySettings {
+            integrator: Integrator::ImplicitEuler,
+            gas_amount: 200.0,
+            ground: true,
+            ground_height: -1.2,
+            leak_rate: 0.0,
+            threads,
+            ..BodySettings::default()
+        };
+        Body::new(&mesh, &topology, settings).unwrap()
+    }
+
+    /// The energies the implicit integrator prepares at the end of a step are those of a new
+    /// measurement of that state (the same bits for kinetic, spring and gravitational energy and
+    /// the strain; the gas to rounding), through the fall, the impact and the rest.
+    #[test]
+    fn prepared_end_energies_are_those_of_the_end_state() {
+        let mut body = ball(2);
+        for step in 0..60 {
+            body.step().unwrap();
+            let prepared = body.energy_now.expect("the step keeps its end energies");
+            assert!(matches!(&body.scratch, Scratch::Implicit(s) if s.has_prepared()), "step {step}");
+            let fresh = body.energy_parts();
+            assert_eq!(prepared.kinetic.to_bits(), fresh.kinetic.to_bits(), "step {step}");
+            assert_eq!(prepared.spring.to_bits(), fresh.spring.to_bits(), "step {step}");
+            assert_eq!(prepared.gravity.to_bits(), fresh.gravity.to_bits(), "step {step}");
+            assert_eq!(prepared.max_strain.to_bits(), fresh.max_strain.to_bits(), "step {step}");
+            assert!((prepared.gas - fresh.gas).abs() <= 1e-9 * fresh.gas.abs().max(1.0), "step {step}");
+            assert!(prepared.kinetic > 0.0 && prepared.spring > 0.0);
+        }
+    }
+
+    /// Starting a step from what the last one prepared gives the same positions and velocities,
+    /// to the bit, as measuring the state again at its start.
+    #[test]
+    fn a_step_from_the_prepared_state_is_the_same_as_from_a_new_measurement() {
+        let (mut reused, mut fresh) = (ball(2), ball(2));
+        for step in 0..40 {
+            if let Scratch::Implicit(s) = &mut fresh.scratch {
+                s.forget_prepared();
+            }
+            reused.step().unwrap();
+            fresh.step().unwrap();
+            assert_eq!(reused.nodes.x, fresh.nodes.x, "step {step}");
+            assert_eq!(reused.nodes.v, fresh.nodes.v, "step {step}");
+        }
+        assert!(reused.nodes.x.iter().any(|x| x.y < -1.1), "the ball reached the ground");
     }
 }

@@ -8,8 +8,8 @@ use super::coupling_slices::Coupling;
 use super::springs::{is_degenerate, spring_block_coefficients};
 
 /// One spring's share of the assembly, seen from its first end (`Springs::ends[k][0]`): the
-/// spring and damping force on it, its `h² K v` term and the coupling block, plus `|K_s (L - L0)|`
-/// for the force scale. The second end takes the vectors negated (`u` and the velocity
+/// spring and damping force on it, its `h² K v` term and the coupling block, plus its extension
+/// `L - L0` (for the force scale, and for the energy and strain of the state it was made at). The second end takes the vectors negated (`u` and the velocity
 /// difference both flip sign, so they are exactly the negated values) and the same block, so
 /// each spring is computed once, not once per end.
 ///
@@ -20,7 +20,7 @@ pub(crate) struct SpringTerms {
     pub kv: Vec3A,
     pub coupling: Coupling,
     pub force: Vec3,
-    pub stretch: f32,
+    pub extension: f32,
 }
 
 /// What the terms of every spring depend on.
@@ -43,9 +43,10 @@ pub(crate) fn spring_terms(input: &SpringInput, k: usize) -> SpringTerms {
     let [i, j] = input.ends[k];
     let rest = input.rest[k];
     let d = Vec3A::from(input.x[j as usize]) - Vec3A::from(input.x[i as usize]);
+    // The same operations as `Vec3::length`, so the extension is the same bits as the energy's.
     let len = (d.x * d.x + d.y * d.y + d.z * d.z).sqrt();
     if is_degenerate(len, rest) {
-        return SpringTerms::default();
+        return SpringTerms { extension: len - rest, ..SpringTerms::default() };
     }
     let u = d * (1.0 / len);
     let dvel = Vec3A::from(input.v[j as usize]) - Vec3A::from(input.v[i as usize]);
@@ -57,7 +58,7 @@ pub(crate) fn spring_terms(input: &SpringInput, k: usize) -> SpringTerms {
         force: (u * (stretch + kd * along)).into(),
         kv: (dvel * a + u * (b * along)) * h2,
         coupling: Coupling::new(u, alpha, beta),
-        stretch: stretch.abs(),
+        extension: len - rest,
     }
 }
 
@@ -194,7 +195,7 @@ unsafe fn spring_terms_avx2(input: &SpringInput, first: usize, out: &mut [Spring
             _mm256_mul_ps(uy, root),
             _mm256_mul_ps(uz, root),
             alpha,
-            stretch,
+            _mm256_sub_ps(len, rest),
             len,
         ];
         let mut v = [[0f32; 8]; 12];
@@ -204,13 +205,13 @@ unsafe fn spring_terms_avx2(input: &SpringInput, first: usize, out: &mut [Spring
         }
         for (l, t) in out[k..k + 8].iter_mut().enumerate() {
             *t = if is_degenerate(v[11][l], input.rest[s + l]) {
-                SpringTerms::default()
+                SpringTerms { extension: v[10][l], ..SpringTerms::default() }
             } else {
                 SpringTerms {
                     force: Vec3::new(v[0][l], v[1][l], v[2][l]),
                     kv: Vec3A::new(v[3][l], v[4][l], v[5][l]),
                     coupling: Coupling(glam::Vec4::new(v[6][l], v[7][l], v[8][l], v[9][l])),
-                    stretch: v[10][l].abs(),
+                    extension: v[10][l],
                 }
             };
         }
@@ -253,13 +254,21 @@ mod tests {
         let input =
             SpringInput { ends: &ends, rest: &rest, x: &x, v: &v, stiffness: 1234.5, damping: 6.7, h: 1.0 / 60.0 };
         let expected: Vec<SpringTerms> = (0..ends.len()).map(|k| spring_terms(&input, k)).collect();
-        assert!(expected.iter().any(|t| *t == SpringTerms::default()), "a degenerate spring is in the test");
+        assert!(expected.iter().any(|t| t.coupling == Coupling::default()), "a degenerate spring is in the test");
         assert!(expected.iter().filter(|t| t.coupling.w().length() > 0.0).count() > 150);
         for first in [0, 3, 8] {
             let mut out = vec![SpringTerms::default(); ends.len() - first];
             spring_terms_range(&input, first, &mut out);
             for (k, (got, want)) in out.iter().zip(&expected[first..]).enumerate() {
-                assert_eq!(got, want, "spring {}", first + k);
+                let bits = |t: &SpringTerms| {
+                    let mut all = Vec::new();
+                    all.extend(t.kv.to_array().map(f32::to_bits));
+                    all.extend(t.coupling.0.to_array().map(f32::to_bits));
+                    all.extend(t.force.to_array().map(f32::to_bits));
+                    all.push(t.extension.to_bits());
+                    all
+                };
+                assert_eq!(bits(got), bits(want), "spring {}", first + k);
             }
         }
     }
