@@ -77,6 +77,12 @@ impl CoarseView<'_> {
         }
     }
 
+    /// The factor rows of the aggregates of the vertices `rows`, if it knows them all.
+    #[inline]
+    pub fn rows_of(&self, rows: std::ops::Range<usize>) -> Option<&[u32]> {
+        self.row_of.get(rows)
+    }
+
     /// The coarse correction at vertex i from the solution `y` in row order (zero for a vertex
     /// it does not know).
     #[inline]

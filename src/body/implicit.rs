@@ -473,13 +473,18 @@ fn residual_chunk(
     any_contact: bool,
 ) -> (f64, f64) {
     let (mut rr, mut rz) = (0.0f64, 0.0f64);
-    for k in 0..dv.len() {
-        let i = first + k;
-        dv[k] += p[i] * alpha;
+    // The chunk's rows, sliced once (no bounds check per vertex).
+    let n = dv.len();
+    let rows = first..first + n;
+    let (p, inv_diag) = (&p[rows.clone()], &inv_diag[rows.clone()]);
+    let contact = if any_contact { &contact[rows] } else { &[][..] };
+    assert!(r.len() == n && z.len() == n && ap.len() == n);
+    for k in 0..n {
+        dv[k] += p[k] * alpha;
         let ri = r[k] - ap[k] * alpha;
-        let mut zi = inv_diag[i] * ri;
+        let mut zi = inv_diag[k] * ri;
         if any_contact {
-            zi = contact[i].apply(zi);
+            zi = contact[k].apply(zi);
         }
         r[k] = ri;
         z[k] = zi;
@@ -531,24 +536,93 @@ fn direction_chunk(
     gas: &mut [f64],
 ) {
     gas.fill(0.0);
+    let rows = first..first + p.len();
+    // The chunk's rows of every array, sliced once: indexing the whole arrays per vertex (with
+    // their bounds checks and the optional arrays' lookups) made this pass, run once per
+    // iteration, cost as many instructions as a product with the matrix (cachegrind).
+    let z = &z[rows.clone()];
+    let inv_mass = &sys.model.inv_mass[rows.clone()];
+    let contact = contact.get(rows.clone()).unwrap_or(&[]);
+    let fragment = sys.vertex_fragment.get(rows.clone()).unwrap_or(&[]);
+    let gradient = sys.gradient.get(rows.clone()).unwrap_or(&[]);
+    if let Some((view, solution)) = coarse.filter(|(view, _)| view.rows_of(rows.clone()).is_none()) {
+        // A vertex the coarse level does not know (never after a split, which extends it): the
+        // general path, with a zero correction there.
+        let mut run = GasRun::default();
+        for k in 0..p.len() {
+            let i = first + k;
+            let mut zi = z[k];
+            if inv_mass[k] > 0.0 {
+                let c = view.correction(i, solution);
+                zi += contact.get(k).map_or(c, |f| f.apply(c));
+            }
+            let value = zi + p[k] * beta;
+            p[k] = value;
+            if let Some(&frag) = fragment.get(k).filter(|&&f| f != u32::MAX) {
+                run.add(gas, frag as usize, Vec3A::from(gradient[k]).dot(value) as f64);
+            }
+        }
+        run.flush(gas);
+        return;
+    }
+    let coarse = coarse.and_then(|(view, solution)| Some((view.rows_of(rows.clone())?, solution)));
+    match (coarse, contact.is_empty(), fragment.is_empty()) {
+        (Some(coarse), true, true) => {
+            direction_rows::<true, false, false>(p, z, inv_mass, coarse, contact, (fragment, gradient), beta, gas)
+        }
+        (Some(coarse), true, false) => {
+            direction_rows::<true, false, true>(p, z, inv_mass, coarse, contact, (fragment, gradient), beta, gas)
+        }
+        (Some(coarse), false, true) => {
+            direction_rows::<true, true, false>(p, z, inv_mass, coarse, contact, (fragment, gradient), beta, gas)
+        }
+        (Some(coarse), false, false) => {
+            direction_rows::<true, true, true>(p, z, inv_mass, coarse, contact, (fragment, gradient), beta, gas)
+        }
+        (None, _, true) => {
+            direction_rows::<false, false, false>(p, z, inv_mass, (&[], &[]), contact, (fragment, gradient), beta, gas)
+        }
+        (None, _, false) => {
+            direction_rows::<false, false, true>(p, z, inv_mass, (&[], &[]), contact, (fragment, gradient), beta, gas)
+        }
+    }
+}
+
+/// [`direction_chunk`] on a chunk's rows (every slice but `solution` holds exactly the chunk's
+/// rows), for one combination of a coarse level, contacts and gas (so the loop tests none of
+/// them per vertex). Without the coarse level the contacts are not read: z is filtered already.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn direction_rows<const COARSE: bool, const CONTACT: bool, const GAS: bool>(
+    p: &mut [Vec3A],
+    z: &[Vec3A],
+    inv_mass: &[f32],
+    (row_of, solution): (&[u32], &[Vec3A]),
+    contact: &[ContactFilter],
+    (fragment, gradient): (&[u32], &[Vec3]),
+    beta: f32,
+    gas: &mut [f64],
+) {
+    let n = p.len();
+    assert!(z.len() == n && inv_mass.len() == n);
+    assert!(!COARSE || row_of.len() == n);
+    assert!(!CONTACT || contact.len() == n);
+    assert!(!GAS || (fragment.len() == n && gradient.len() == n));
     // `Σ g·p` of the current run of vertices of one fragment, in a register: added into `gas`
     // through memory at every vertex it made a chain of loads and stores that set the pace of
     // this pass.
     let mut run = GasRun::default();
-    for k in 0..p.len() {
-        let i = first + k;
-        let mut zi = z[i];
-        if let Some((coarse, solution)) = coarse {
+    for k in 0..n {
+        let mut zi = z[k];
+        if COARSE && inv_mass[k] > 0.0 {
             // The coarse correction, filtered like the rest of z.
-            if sys.model.inv_mass[i] > 0.0 {
-                let c = coarse.correction(i, solution);
-                zi += contact.get(i).map_or(c, |f| f.apply(c));
-            }
+            let c = solution[row_of[k] as usize];
+            zi += if CONTACT { contact[k].apply(c) } else { c };
         }
         let value = zi + p[k] * beta;
         p[k] = value;
-        if let Some(frag) = sys.fragment(i) {
-            run.add(gas, frag, Vec3A::from(sys.gradient[i]).dot(value) as f64);
+        if GAS && fragment[k] != u32::MAX {
+            run.add(gas, fragment[k] as usize, Vec3A::from(gradient[k]).dot(value) as f64);
         }
     }
     run.flush(gas);
