@@ -12,8 +12,10 @@ pub(crate) fn kinetic(mass: &[f32], v: &[Vec3]) -> f64 {
     mass.iter().zip(v).map(|(&m, v)| 0.5 * m as f64 * v.as_dvec3().length_squared()).sum()
 }
 
-/// Springs per parallel chunk (fixed, so the sums do not depend on the thread count).
-pub(crate) const SPRING_CHUNK: usize = 4096;
+/// Springs per parallel chunk (fixed, so the sums do not depend on the thread count); also the
+/// implicit integrator's chunk of spring terms, which sums the end-of-substep energies in the
+/// same chunks.
+pub(crate) const SPRING_CHUNK: usize = 2048;
 
 /// Spring energy (J) and the largest spring strain (0 when none is stretched) of spring chunk
 /// `c`: the end-of-step stats need both (SPEC 2.5), and each needs every spring's length.

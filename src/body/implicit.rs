@@ -194,8 +194,9 @@ const CG_FORCE_TOLERANCE: f64 = 1e-4;
 const CHUNK: usize = 1024;
 const _: () = assert!(CHUNK % SLICE == 0);
 
-/// Springs per chunk of the spring pass (any split gives the same result: no sums).
-const SPRING_CHUNK: usize = 2048;
+/// Springs per chunk of the spring pass: the energy's chunks, so that the pass can sum the
+/// end-of-substep spring energy as `energy::state_energies` does (the terms need no sums).
+const SPRING_CHUNK: usize = energy::SPRING_CHUNK;
 
 /// `a bᵀ`.
 fn outer(a: Vec3A, b: Vec3A) -> Mat3A {
@@ -1193,8 +1194,11 @@ pub(crate) fn substep(
         team.barrier();
     };
     // The spring terms (chunks of springs), and `Σ g·v` per chunk of vertices, in one pass, at
-    // the state (x, v) with the gas fragments and gradient `gas_state`.
-    let terms_pass = |team: &Team, x: &[Vec3], v: &[Vec3], gas_state: (&[u32], &[Vec3])| {
+    // the state (x, v) with the gas fragments and gradient `gas_state`; with `energies` also the
+    // chunks' energies of that state (in the chunks and order of `energy::state_energies`: the
+    // same bits), each spring chunk's from its terms while they are still in the cache (a pass
+    // of its own read the whole 1.5 MB of terms of the balloon again for their extensions).
+    let terms_pass = |team: &Team, x: &[Vec3], v: &[Vec3], gas_state: (&[u32], &[Vec3]), energies: bool| {
         let spring_input = SpringInput {
             ends: &model.springs.ends,
             rest: &model.springs.rest,
@@ -1206,13 +1210,34 @@ pub(crate) fn substep(
         };
         let spring_chunks = model.springs.len().div_ceil(SPRING_CHUNK);
         let gas_chunks = if fragments > 0 { chunks } else { 0 };
-        team.claim(spring_chunks + gas_chunks, |c| {
+        let vertex_chunks = if energies { n.div_ceil(energy::VERTEX_CHUNK) } else { 0 };
+        let (ks, g) = (model.settings.spring_stiffness, model.settings.gravity);
+        team.claim(spring_chunks + gas_chunks + vertex_chunks, |c| {
             if c < spring_chunks {
                 let range = c * SPRING_CHUNK..((c + 1) * SPRING_CHUNK).min(model.springs.len());
                 let first = range.start;
                 // SAFETY: this chunk of the terms, written by this member alone.
-                let terms = unsafe { shared.terms.part(range) };
+                let terms = unsafe { shared.terms.part(range.clone()) };
                 spring_terms_range(&spring_input, first, terms);
+                if energies {
+                    let (mut spring, mut strain) = (0.0f64, 0.0f32);
+                    for (t, &rest) in terms.iter().zip(&model.springs.rest[range]) {
+                        // `springs::spring_energy` and `spring_strain` of the same extension.
+                        let stretch = t.extension as f64;
+                        spring += 0.5 * ks as f64 * stretch * stretch;
+                        strain = strain.max(t.extension / rest);
+                    }
+                    // SAFETY: this chunk's slot (the spring chunks are the energy's), written
+                    // by this member alone.
+                    unsafe { end_springs.part(c..c + 1)[0] = (spring, strain) };
+                }
+            } else if c >= spring_chunks + gas_chunks {
+                let c = c - spring_chunks - gas_chunks;
+                let range = c * energy::VERTEX_CHUNK..((c + 1) * energy::VERTEX_CHUNK).min(n);
+                let kinetic = energy::kinetic(&model.mass[range.clone()], &v[range.clone()]);
+                let gravity = energy::gravity(&model.mass[range.clone()], &x[range], g);
+                // SAFETY: this chunk's slot, written by this member alone.
+                unsafe { end_vertices.part(c..c + 1)[0] = (kinetic, gravity) };
             } else {
                 let c = c - spring_chunks;
                 // SAFETY: this chunk's sums, written by this member alone.
@@ -1245,7 +1270,7 @@ pub(crate) fn substep(
             let previous_dv = unsafe { previous.whole() };
             let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
             if !reuse {
-                terms_pass(team, sys.x, sys.v, (sys.vertex_fragment, sys.gradient));
+                terms_pass(team, sys.x, sys.v, (sys.vertex_fragment, sys.gradient), false);
             }
             let mut gas_dot_v = vec![0.0f64; fragments];
             // SAFETY: nobody writes the sums or the terms in this pass.
@@ -1401,35 +1426,8 @@ pub(crate) fn substep(
                 let vertex_fragment = guard.as_deref().map_or(&[][..], |g| &g.vertex_fragment);
                 // SAFETY: the gradient was finished before the barrier ending `gradient_pass`;
                 // nobody writes it from here on.
-                terms_pass(team, x, v, (vertex_fragment, unsafe { gradient.whole() }));
+                terms_pass(team, x, v, (vertex_fragment, unsafe { gradient.whole() }), true);
             }
-            // The energies of this state, in the chunks and order of `energy::state_energies`.
-            let (ks, g) = (model.settings.spring_stiffness, model.settings.gravity);
-            let spring_chunks = model.springs.len().div_ceil(energy::SPRING_CHUNK);
-            let vertex_chunks = n.div_ceil(energy::VERTEX_CHUNK);
-            // SAFETY: nobody writes the terms after `terms_pass`.
-            let terms = unsafe { shared.terms.whole() };
-            team.claim(spring_chunks + vertex_chunks, |c| {
-                if c < spring_chunks {
-                    let range = c * energy::SPRING_CHUNK..((c + 1) * energy::SPRING_CHUNK).min(model.springs.len());
-                    let (mut spring, mut strain) = (0.0f64, 0.0f32);
-                    for (t, &rest) in terms[range.clone()].iter().zip(&model.springs.rest[range]) {
-                        // `springs::spring_energy` and `spring_strain` of the same extension.
-                        let stretch = t.extension as f64;
-                        spring += 0.5 * ks as f64 * stretch * stretch;
-                        strain = strain.max(t.extension / rest);
-                    }
-                    // SAFETY: this chunk's slot, written by this member alone.
-                    unsafe { end_springs.part(c..c + 1)[0] = (spring, strain) };
-                } else {
-                    let c = c - spring_chunks;
-                    let range = c * energy::VERTEX_CHUNK..((c + 1) * energy::VERTEX_CHUNK).min(n);
-                    let kinetic = energy::kinetic(&model.mass[range.clone()], &v[range.clone()]);
-                    let gravity = energy::gravity(&model.mass[range.clone()], &x[range], g);
-                    // SAFETY: this chunk's slot, written by this member alone.
-                    unsafe { end_vertices.part(c..c + 1)[0] = (kinetic, gravity) };
-                }
-            });
         }
         (iterations, any_contact)
     });
