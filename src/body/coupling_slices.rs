@@ -73,7 +73,7 @@ pub(crate) struct CouplingSlices {
 impl CouplingSlices {
     /// Lays the slices out for rows whose couplings are counted by `row_offsets` (CSR offsets,
     /// one more entry than rows). The lanes of rows past the last one (the tail of the last
-    /// slice) are made padding here; every other lane is written by [`SliceRowsMut::set_row`].
+    /// slice) are made padding here; every other lane is written through [`SliceRowsMut::row`].
     pub fn layout(&mut self, row_offsets: &[u32]) {
         let n = row_offsets.len().saturating_sub(1);
         let slices = n.div_ceil(SLICE);
@@ -140,27 +140,25 @@ impl SliceRowsMut<'_> {
         self.offsets[slice] as usize - base..self.offsets[slice + 1] as usize - base
     }
 
-    /// Writes the `k`-th coupling of row `row` and its other end.
+    /// Row `row`'s lanes, to write its couplings (the slice's groups looked up once per row,
+    /// not once per coupling: the lookups and checks took about 28 instructions per coupling).
     #[inline]
-    pub fn set(&mut self, row: usize, k: usize, c: Coupling, other: u32) {
+    pub fn row(&mut self, row: usize) -> RowMut<'_> {
         let groups = self.groups_of(row);
-        assert!(k < groups.len(), "coupling {k} of row {row} in a slice of {}", groups.len());
-        let (group, lane) = (&mut self.groups[groups.start + k], row % SLICE);
-        let w = c.w();
-        group.w[0][lane] = w.x;
-        group.w[1][lane] = w.y;
-        group.w[2][lane] = w.z;
-        group.alpha[lane] = c.alpha();
-        group.other[lane] = other;
+        RowMut { groups: &mut self.groups[groups], lane: row % SLICE, row }
+    }
+
+    /// Writes the `k`-th coupling of row `row` and its other end.
+    #[cfg(test)]
+    pub fn set(&mut self, row: usize, k: usize, c: Coupling, other: u32) {
+        self.row(row).set(k, c, other);
     }
 
     /// Pads row `row`'s lanes from its `count`-th coupling to the end of its slice (every row
     /// is finished once per assembly, after its couplings are set).
+    #[cfg(test)]
     pub fn finish_row(&mut self, row: usize, count: usize) {
-        let groups = self.groups_of(row);
-        for group in &mut self.groups[(groups.start + count).min(groups.end)..groups.end] {
-            pad(group, row % SLICE, row);
-        }
+        self.row(row).finish(count);
     }
 
     /// Writes row `row`'s couplings (with their other ends) and pads the rest of its slice's
@@ -173,6 +171,39 @@ impl SliceRowsMut<'_> {
             count = k + 1;
         }
         self.finish_row(row, count);
+    }
+}
+
+/// One row's lanes in the groups of its slice ([`SliceRowsMut::row`]).
+pub(crate) struct RowMut<'a> {
+    groups: &'a mut [CouplingGroup],
+    lane: usize,
+    row: usize,
+}
+
+impl RowMut<'_> {
+    /// Writes the row's `k`-th coupling and its other end.
+    #[inline(always)]
+    pub fn set(&mut self, k: usize, c: Coupling, other: u32) {
+        let count = self.groups.len();
+        let Some(group) = self.groups.get_mut(k) else {
+            panic!("coupling {k} of row {} in a slice of {count}", self.row)
+        };
+        let (w, lane) = (c.w(), self.lane % SLICE);
+        group.w[0][lane] = w.x;
+        group.w[1][lane] = w.y;
+        group.w[2][lane] = w.z;
+        group.alpha[lane] = c.alpha();
+        group.other[lane] = other;
+    }
+
+    /// Pads the row's lanes from its `count`-th coupling to the end of its slice (every row is
+    /// finished once per assembly, after its couplings are set).
+    pub fn finish(self, count: usize) {
+        let (lane, row) = (self.lane, self.row);
+        for group in self.groups.iter_mut().skip(count) {
+            pad(group, lane, row);
+        }
     }
 }
 
