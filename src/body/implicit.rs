@@ -42,14 +42,37 @@ enum ContactFilter {
     Slide(Vec3, f32),
 }
 
-impl ContactFilter {
-    fn apply(self, value: Vec3A) -> Vec3A {
-        match self {
-            ContactFilter::Free => value,
-            ContactFilter::Slide(n, _) => {
-                let n = Vec3A::from(n);
-                value - n * value.dot(n)
-            }
+/// The contact filters as the solve's passes read them: per vertex the slot of its contact
+/// normal (`u32::MAX`: free), the normals in the slots. Four bytes a vertex instead of the
+/// twenty of a [`ContactFilter`]: the three passes of each iteration read them at every vertex
+/// (while anything touches an obstacle), and those passes are bound by the bytes they stream.
+/// Empty when nothing touches.
+#[derive(Clone, Copy, Default)]
+struct ContactRows<'a> {
+    slot: &'a [u32],
+    normal: &'a [Vec3A],
+}
+
+impl<'a> ContactRows<'a> {
+    fn is_empty(&self) -> bool {
+        self.slot.is_empty()
+    }
+
+    /// The slots of the vertices `rows` (indexed from 0), or empty without contacts.
+    fn rows(self, rows: std::ops::Range<usize>) -> ContactRows<'a> {
+        ContactRows { slot: self.slot.get(rows).unwrap_or(&[]), normal: self.normal }
+    }
+
+    /// The `k`-th vertex's filter applied to `value`: its component along the contact normal
+    /// removed (none when the vertex is free).
+    #[inline(always)]
+    fn apply(&self, k: usize, value: Vec3A) -> Vec3A {
+        let slot = self.slot[k];
+        if slot == u32::MAX {
+            value
+        } else {
+            let n = self.normal[slot as usize];
+            value - n * value.dot(n)
         }
     }
 }
@@ -83,8 +106,12 @@ pub(crate) struct ImplicitScratch {
     gas_partial: Vec<f64>,
     /// Δv of the previous substep (the warm start), reset when the vertex count changes.
     previous_dv: Vec<Vec3A>,
-    /// Contact constraint of each vertex (only with obstacles, and only while one touches).
+    /// Contact constraint of each vertex (only with obstacles, and only while one touches),
+    /// and the same in the form the solve reads ([`ContactRows`]: each chunk's normals in the
+    /// first slots of its own rows).
     contact: Vec<ContactFilter>,
+    contact_slot: Vec<u32>,
+    contact_normal: Vec<Vec3A>,
     /// The coarse level of the preconditioner (made on the first substep) and the substep
     /// length it was made (or tried) for.
     coarse: Option<CoarseSpace>,
@@ -165,6 +192,8 @@ impl ImplicitScratch {
                 + self.previous_dv.capacity())
                 * 16
             + self.contact.capacity() * std::mem::size_of::<ContactFilter>()
+            + self.contact_slot.capacity() * 4
+            + self.contact_normal.capacity() * 16
             + self.couplings.memory_bytes()
             + self.spring_terms.capacity() * std::mem::size_of::<SpringTerms>()
             + (self.gas_coef.capacity() + self.gas_dot.capacity() + self.gas_partial.capacity()) * 8
@@ -245,6 +274,8 @@ struct AssemblyTask<'a> {
     /// obstacles).
     dv: &'a mut [Vec3A],
     contact: &'a mut [ContactFilter],
+    contact_slot: &'a mut [u32],
+    contact_normal: &'a mut [Vec3A],
     /// Over the chunk: `Σ g·Δv` per gas fragment (the start of the solve).
     gas: &'a mut [f64],
 }
@@ -265,6 +296,7 @@ fn assemble_chunk(
     t.gas.fill(0.0);
     let mut run = GasRun::default();
     let (mut magnitude_squared, mut rhs_squared, mut any_contact) = (0.0f64, 0.0f64, false);
+    let mut contacts = 0;
     for k in 0..t.rhs.len() {
         let i = t.first + k;
         // The same operations as `external_forces` and `add_gas_forces_parallel`.
@@ -286,6 +318,14 @@ fn assemble_chunk(
         if let Some(slot) = t.contact.get_mut(k) {
             *slot = filter;
             any_contact |= filter != ContactFilter::Free;
+            t.contact_slot[k] = match filter {
+                ContactFilter::Free => u32::MAX,
+                ContactFilter::Slide(normal, _) => {
+                    t.contact_normal[contacts] = normal.into();
+                    contacts += 1;
+                    (t.first + contacts - 1) as u32
+                }
+            };
         }
         magnitude_squared += (magnitude as f64) * (magnitude as f64);
         rhs_squared += rhs.length_squared() as f64;
@@ -404,7 +444,7 @@ struct ProductTask<'a> {
 /// ([`for_each_row_sum`]).
 fn product_rows(
     sys: &System,
-    contact: &[ContactFilter],
+    contact: ContactRows,
     (offsets, groups): (&[u32], &[CouplingGroup]),
     input: &[Vec3A],
     gas_scale: &[f32],
@@ -420,7 +460,7 @@ fn product_rows(
     let (mass, inv_mass, input_rows) = (&model.mass[rows.clone()], &model.inv_mass[rows.clone()], &input[rows.clone()]);
     let fragment = sys.vertex_fragment.get(rows.clone()).unwrap_or(&[]);
     let gradient = sys.gradient.get(rows.clone()).unwrap_or(&[]);
-    let contact = contact.get(rows).unwrap_or(&[]);
+    let contact = contact.rows(rows);
     // One loop per combination of gas and contacts (the loop then tests neither per row, and
     // the rows' slices are checked once: about 48 instructions per row before, cachegrind).
     let gas = (fragment, gradient, gas_scale);
@@ -443,12 +483,12 @@ fn product_tail<const GAS: bool, const CONTACT: bool>(
     mass: &[f32],
     inv_mass: &[f32],
     (fragment, gradient, gas_scale): (&[u32], &[Vec3], &[f32]),
-    contact: &[ContactFilter],
+    contact: ContactRows,
 ) -> f64 {
     let n = out.len();
     assert!(input.len() == n && mass.len() == n && inv_mass.len() == n);
     assert!(!GAS || (fragment.len() == n && gradient.len() == n));
-    assert!(!CONTACT || contact.len() == n);
+    assert!(!CONTACT || contact.slot.len() == n);
     let mut dots = [0.0f64; 4];
     for k in 0..n {
         let xi = input[k];
@@ -457,7 +497,7 @@ fn product_tail<const GAS: bool, const CONTACT: bool>(
             acc += Vec3A::from(gradient[k]) * gas_scale[fragment[k] as usize];
         }
         if CONTACT {
-            acc = contact[k].apply(acc);
+            acc = contact.apply(k, acc);
         }
         if inv_mass[k] == 0.0 {
             acc = Vec3A::ZERO;
@@ -495,7 +535,7 @@ fn residual_chunk(
     p: &[Vec3A],
     ap: &[Vec3A],
     inv_diag: &[Mat3A],
-    contact: &[ContactFilter],
+    contact: ContactRows,
     alpha: f32,
     any_contact: bool,
 ) -> (f64, f64) {
@@ -504,14 +544,14 @@ fn residual_chunk(
     let n = dv.len();
     let rows = first..first + n;
     let (p, inv_diag) = (&p[rows.clone()], &inv_diag[rows.clone()]);
-    let contact = if any_contact { &contact[rows] } else { &[][..] };
+    let contact = contact.rows(rows);
     assert!(r.len() == n && z.len() == n && ap.len() == n);
     for k in 0..n {
         dv[k] += p[k] * alpha;
         let ri = r[k] - ap[k] * alpha;
         let mut zi = inv_diag[k] * ri;
         if any_contact {
-            zi = contact[k].apply(zi);
+            zi = contact.apply(k, zi);
         }
         r[k] = ri;
         z[k] = zi;
@@ -530,7 +570,7 @@ fn initial_chunk(
     rhs: &[Vec3A],
     ap: &[Vec3A],
     inv_diag: &[Mat3A],
-    contact: &[ContactFilter],
+    contact: ContactRows,
     any_contact: bool,
 ) -> f64 {
     let mut rz = 0.0f64;
@@ -539,8 +579,8 @@ fn initial_chunk(
         let mut ri = rhs[i] - ap[k];
         let mut zi = inv_diag[i] * ri;
         if any_contact {
-            ri = contact[i].apply(ri);
-            zi = contact[i].apply(zi);
+            ri = contact.apply(i, ri);
+            zi = contact.apply(i, zi);
         }
         r[k] = ri;
         z[k] = zi;
@@ -558,7 +598,7 @@ fn direction_chunk(
     p: &mut [Vec3A],
     z: &[Vec3A],
     coarse: Option<(&CoarseView, &[Vec3A])>,
-    contact: &[ContactFilter],
+    contact: ContactRows,
     beta: f32,
     gas: &mut [f64],
 ) {
@@ -569,7 +609,7 @@ fn direction_chunk(
     // iteration, cost as many instructions as a product with the matrix (cachegrind).
     let z = &z[rows.clone()];
     let inv_mass = &sys.model.inv_mass[rows.clone()];
-    let contact = contact.get(rows.clone()).unwrap_or(&[]);
+    let contact = contact.rows(rows.clone());
     let fragment = sys.vertex_fragment.get(rows.clone()).unwrap_or(&[]);
     let gradient = sys.gradient.get(rows.clone()).unwrap_or(&[]);
     if let Some((view, solution)) = coarse.filter(|(view, _)| view.rows_of(rows.clone()).is_none()) {
@@ -581,7 +621,7 @@ fn direction_chunk(
             let mut zi = z[k];
             if inv_mass[k] > 0.0 {
                 let c = view.correction(i, solution);
-                zi += contact.get(k).map_or(c, |f| f.apply(c));
+                zi += if contact.is_empty() { c } else { contact.apply(k, c) };
             }
             let value = zi + p[k] * beta;
             p[k] = value;
@@ -625,7 +665,7 @@ fn direction_rows<const COARSE: bool, const CONTACT: bool, const GAS: bool>(
     z: &[Vec3A],
     inv_mass: &[f32],
     (row_of, solution): (&[u32], &[Vec3A]),
-    contact: &[ContactFilter],
+    contact: ContactRows,
     (fragment, gradient): (&[u32], &[Vec3]),
     beta: f32,
     gas: &mut [f64],
@@ -633,7 +673,7 @@ fn direction_rows<const COARSE: bool, const CONTACT: bool, const GAS: bool>(
     let n = p.len();
     assert!(z.len() == n && inv_mass.len() == n);
     assert!(!COARSE || row_of.len() == n);
-    assert!(!CONTACT || contact.len() == n);
+    assert!(!CONTACT || contact.slot.len() == n);
     assert!(!GAS || (fragment.len() == n && gradient.len() == n));
     // `Σ g·p` of the current run of vertices of one fragment, in a register: added into `gas`
     // through memory at every vertex it made a chain of loads and stores that set the pace of
@@ -644,7 +684,7 @@ fn direction_rows<const COARSE: bool, const CONTACT: bool, const GAS: bool>(
         if COARSE && inv_mass[k] > 0.0 {
             // The coarse correction, filtered like the rest of z.
             let c = solution[row_of[k] as usize];
-            zi += if CONTACT { contact[k].apply(c) } else { c };
+            zi += if CONTACT { contact.apply(k, c) } else { c };
         }
         let value = zi + p[k] * beta;
         p[k] = value;
@@ -659,7 +699,7 @@ fn direction_rows<const COARSE: bool, const CONTACT: bool, const GAS: bool>(
 /// the stopping rule.
 struct SolveInput<'a> {
     sys: &'a System<'a>,
-    contact: &'a [ContactFilter],
+    contact: ContactRows<'a>,
     coupling: (&'a [u32], &'a [CouplingGroup]),
     rhs: &'a [Vec3A],
     inv_diag: &'a [Mat3A],
@@ -681,6 +721,8 @@ struct Shared<'a> {
     rhs: SharedSlice<'a, Vec3A>,
     inv_diag: SharedSlice<'a, Mat3A>,
     contact: SharedSlice<'a, ContactFilter>,
+    contact_slot: SharedSlice<'a, u32>,
+    contact_normal: SharedSlice<'a, Vec3A>,
     terms: SharedSlice<'a, SpringTerms>,
     dv: SharedSlice<'a, Vec3A>,
     r: SharedSlice<'a, Vec3A>,
@@ -1122,6 +1164,8 @@ pub(crate) fn substep(
     s.contact.clear();
     if !obstacles.is_empty() {
         s.contact.resize(n, ContactFilter::Free);
+        s.contact_slot.resize(n, u32::MAX);
+        s.contact_normal.resize(n, Vec3A::ZERO);
     }
     let fragments = s.gas_dot.len();
     let chunks = n.div_ceil(CHUNK);
@@ -1156,6 +1200,8 @@ pub(crate) fn substep(
         rhs: SharedSlice::new(&mut s.rhs),
         inv_diag: SharedSlice::new(&mut s.inv_diag),
         contact: SharedSlice::new(&mut s.contact),
+        contact_slot: SharedSlice::new(&mut s.contact_slot),
+        contact_normal: SharedSlice::new(&mut s.contact_normal),
         terms: SharedSlice::new(&mut s.spring_terms),
         dv: SharedSlice::new(&mut s.dv),
         r: SharedSlice::new(&mut s.r),
@@ -1323,7 +1369,9 @@ pub(crate) fn substep(
                         rhs: shared.rhs.part(rows.clone()),
                         inv_diag: shared.inv_diag.part(rows.clone()),
                         dv: shared.dv.part(rows.clone()),
-                        contact: if has_contact { shared.contact.part(rows) } else { &mut [] },
+                        contact: if has_contact { shared.contact.part(rows.clone()) } else { &mut [] },
+                        contact_slot: if has_contact { shared.contact_slot.part(rows.clone()) } else { &mut [] },
+                        contact_normal: if has_contact { shared.contact_normal.part(rows) } else { &mut [] },
                         gas: shared.gas.part(gas_rows(c)),
                     }
                 };
@@ -1353,7 +1401,11 @@ pub(crate) fn substep(
                 let input = unsafe {
                     SolveInput {
                         sys: &sys,
-                        contact: if any_contact { shared.contact.whole() } else { &[] },
+                        contact: if any_contact {
+                            ContactRows { slot: shared.contact_slot.whole(), normal: shared.contact_normal.whole() }
+                        } else {
+                            ContactRows::default()
+                        },
                         coupling: (shared.coupling_offsets, shared.couplings.whole()),
                         rhs: shared.rhs.whole(),
                         inv_diag: shared.inv_diag.whole(),
