@@ -244,10 +244,11 @@ fn main() {
         ("symplectic Euler, 40 subst., K_d 0.5", SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, 40, 2, 1.0 / 60.0),
         ("explicit Euler, 40 subst., K_d 0.5", SOFTSHELL_INTEGRATOR_EXPLICIT_EULER, 40, 2, 1.0 / 60.0),
     ];
-    // BODY_ONLY=<text> runs only the rows whose name contains it (for quick comparisons);
+    // BODY_ONLY=<text> runs only the rows whose name contains it (for quick comparisons),
+    // BODY_ONLY==<name> only the row of exactly that name;
     // BODY_ONLY=cracking runs only the cracking measurement.
     for (name, integrator, substeps, iterations, h) in configs {
-        if only.as_deref().is_some_and(|o| !name.contains(o)) {
+        if only.as_deref().is_some_and(|o| o.strip_prefix('=').map_or(!name.contains(o), |exact| name != exact)) {
             continue;
         }
         let mut d = base;

@@ -1,0 +1,112 @@
+#!/usr/bin/env bash
+# Side-by-side peer benchmark: the 10,242-vertex balloon of benches/body_balloon.rs stepped by
+# Bullet's btSoftBody (bullet_balloon.cpp) and by our default implicit integrator, run
+# alternately in the same session, so that the speed can be quoted as a ratio on a noisy,
+# shared machine. Bullet is installed for this script only (Debian's libbullet-dev), never a
+# dependency of the crate.
+#   bash benches/peers/balloon_vs_bullet.sh [rounds (default 3)] [quick] [zerog]
+# quick: 200 steps per run instead of 600.
+# zerog: the zero-gravity scene instead (no ground; body_balloon.rs's zero-gravity run, 2
+#        threads, which prints the mean step time only, so the median columns are left empty).
+# Build flags of the C++ side: g++ -std=c++17 -O2, no -march=native (only the untimed driver is
+# compiled here; Bullet is Debian's generic x86-64 build, as our crate is without
+# target-cpu=native).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+
+rounds=3
+quick=""
+zerog=""
+for arg in "$@"; do
+  case "$arg" in
+    quick) quick=quick ;;
+    zerog) zerog=zerog ;;
+    *[!0-9]* | '') echo "usage: $0 [rounds] [quick] [zerog]" >&2; exit 2 ;;
+    *) rounds=$arg ;;
+  esac
+done
+
+if ! dpkg -s libbullet-dev >/dev/null 2>&1; then
+  sudo=""; [ "$(id -u)" -eq 0 ] || sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq libbullet-dev
+fi
+if pkg-config --exists bullet; then
+  # -isystem: Bullet's headers are not ours to warn about.
+  bullet_cflags=$(pkg-config --cflags-only-I bullet | sed 's/-I/-isystem /g')
+  bullet_libs=$(pkg-config --libs bullet)
+else
+  bullet_cflags="-isystem /usr/include/bullet"
+  bullet_libs="-lBulletSoftBody -lBulletDynamics -lBulletCollision -lLinearMath"
+fi
+mkdir -p target/peers
+bullet=target/peers/bullet_balloon
+# shellcheck disable=SC2086 # the flags are lists of words
+g++ -std=c++17 -O2 -Wall -Wextra -o "$bullet" benches/peers/bullet_balloon.cpp $bullet_cflags $bullet_libs
+
+# Our bench binary, as `cargo bench` runs it (the executable with --bench, then the arguments
+# after --).
+ours=$(cargo bench --bench body_balloon --no-run --message-format=json 2>/dev/null |
+  grep -o '"executable":"[^"]*body_balloon[^"]*"' | tail -n 1 | cut -d'"' -f4)
+[ -x "$ours" ] || { echo "could not build or find the body_balloon bench" >&2; exit 1; }
+
+# BODY_ONLY (body_balloon.rs) runs the rows whose name contains the text, or with a leading
+# "=" the row of exactly that name: here the default 2-thread row alone (no zero-gravity run,
+# no cracking measurement). The rows print: name, ms/step, V/V0, min, max, CG it., "p10, median; CPU".
+row() { # the numbers after the row name $1 (exact name) in the bench output on stdin
+  awk -v name="$1" 'index($0, name) == 1 && substr($0, length(name) + 1, 1) == " " {
+    print substr($0, length(name) + 1) }' | tr -d ',;'
+}
+
+printf 'machine: %s cores, load average %s\n' "$(nproc)" "$(cut -d' ' -f1-3 /proc/loadavg)"
+if [ -n "$zerog" ]; then only="zero gravity"; else only="=implicit Euler (default)"; fi
+printf 'Bullet: %s %s; ours: %s (BODY_ONLY="%s")%s\n\n' "$bullet" "$zerog" "$ours" "$only" \
+  "${quick:+, quick (200 steps)}"
+printf '%5s | %-26s | %-26s | %-14s | %s\n' round "Bullet (1 thread)" "ours, 2 threads (default)" \
+  "ours, 1 thread" "ours (2 threads) / Bullet"
+printf '%5s | %8s %8s %8s | %8s %8s %8s | %14s | %8s %8s\n' "" ms/step median V/V0 ms/step median V/V0 ms/step \
+  "mean" "median"
+ratios=()
+median_ratios=()
+for round in $(seq 1 "$rounds"); do
+  # bullet_balloon exits with 1 when a node became NaN; its RESULT line still says so.
+  b=$("$bullet" $quick $zerog | grep '^RESULT' || true)
+  [ -n "$b" ] || { echo "round $round: bullet_balloon printed no result" >&2; exit 1; }
+  b_ms=$(sed 's/.* ms=\([^ ]*\).*/\1/' <<<"$b")
+  b_med=$(sed 's/.* median=\([^ ]*\).*/\1/' <<<"$b")
+  b_vol=$(sed 's/.* settled=\([^ ]*\).*/\1/' <<<"$b")
+  b_nan=$(sed 's/.* nan=\([^ ]*\).*/\1/' <<<"$b")
+  out=$(BODY_ONLY="$only" "$ours" --bench $quick)
+  if [ -n "$zerog" ]; then
+    # "zero gravity, implicit Euler: settled V/V0 <v> (...), <ms> ms/step, ..."
+    line=$(grep '^zero gravity, implicit Euler:' <<<"$out" || true)
+    o_vol=$(sed -n 's/.*settled V\/V0 \([0-9.]*\).*/\1/p' <<<"$line")
+    o_ms=$(sed -n 's/.*, \([0-9.]*\) ms\/step.*/\1/p' <<<"$line")
+    o_med=""
+    o1_ms=""
+    case "$line" in *FAILED*) o_vol=UNSTABLE ;; esac
+  else
+    read -r o_ms o_vol _ _ _ _ o_med _ <<<"$(row "implicit Euler (default)" <<<"$out")"
+    read -r o1_ms _ <<<"$(row "implicit Euler (default), 1 thread" <<<"$out")" || true
+  fi
+  if [ "${o_vol:-}" = UNSTABLE ] || [ -z "${o_ms:-}" ] || [ -z "${o_vol:-}" ]; then
+    echo "round $round: our row failed or was not found:" >&2
+    echo "$out" >&2
+    exit 1
+  fi
+  ratio=$(awk -v o="$o_ms" -v b="$b_ms" 'BEGIN { printf "%.3f", o / b }')
+  median_ratio=-
+  if [ -n "$o_med" ]; then
+    median_ratio=$(awk -v o="$o_med" -v b="$b_med" 'BEGIN { printf "%.3f", o / b }')
+    median_ratios+=("$median_ratio")
+  fi
+  ratios+=("$ratio")
+  printf '%5s | %8.2f %8.2f %8.4f | %8.2f %8s %8.4f | %14s | %8s %8s%s\n' "$round" "$b_ms" "$b_med" \
+    "$b_vol" "$o_ms" "${o_med:--}" "$o_vol" "${o1_ms:--}" "$ratio" "$median_ratio" \
+    "$([ "$b_nan" = 0 ] || echo '  (Bullet produced NaN)')"
+done
+median() { [ $# -gt 0 ] || { echo -; return; }; printf '%s\n' "$@" | sort -g | awk '{ v[NR] = $1 } END {
+  print (NR % 2 ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2) }'; }
+printf '\nmedian over %s rounds of ours (2 threads) / Bullet: %s (mean step times), %s (median step times)\n' \
+  "$rounds" "$(median "${ratios[@]}")" "$(median "${median_ratios[@]}")"
+printf 'load average at the end: %s\n' "$(cut -d' ' -f1-3 /proc/loadavg)"
