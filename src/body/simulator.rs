@@ -16,7 +16,7 @@ use super::implicit::{self, ImplicitScratch};
 use super::obstacles::{Obstacle, resolve};
 use super::settings::{BodySettings, Integrator};
 use super::springs::{Springs, spring_strain};
-use super::surface::{Fracture, Nodes, build_springs};
+use super::surface::{Fracture, Nodes, build_springs, rebuild_springs};
 use super::wind::add_wind;
 use super::xpbd::{self, XpbdScratch};
 use crate::error::{Error, ErrorKind, Result};
@@ -765,7 +765,8 @@ impl Body {
     fn rebuild(&mut self, topology: Topology, old_face_fragment: &[u32]) {
         let n = self.nodes.len();
         let t = Instant::now();
-        self.springs = build_springs(&topology, self.fracture.as_ref(), &self.nodes.rest);
+        let old = std::mem::take(&mut self.springs);
+        self.springs = rebuild_springs(&topology, self.fracture.as_ref(), &self.nodes.rest, old);
         trace_phase("rebuild: springs", t);
         let t = Instant::now();
         self.face_fragment = topology.face_components.clone();

@@ -20,7 +20,10 @@ pub(crate) struct Springs {
 impl Springs {
     /// Builds the per-vertex adjacency for `vertex_count` vertices.
     pub fn build_adjacency(&mut self, vertex_count: usize) {
-        let mut offsets = vec![0u32; vertex_count + 1];
+        // Into the old buffers (see `surface::rebuild_springs`).
+        let mut offsets = std::mem::take(&mut self.offsets);
+        offsets.clear();
+        offsets.resize(vertex_count + 1, 0);
         for &[i, j] in &self.ends {
             debug_assert!(i < j, "spring ends must be ordered: [{i}, {j}]");
             offsets[i as usize + 1] += 1;
@@ -30,7 +33,9 @@ impl Springs {
             offsets[v + 1] += offsets[v];
         }
         let mut cursor = offsets.clone();
-        let mut adjacency = vec![(0u32, 0u32); 2 * self.ends.len()];
+        let mut adjacency = std::mem::take(&mut self.adjacency);
+        adjacency.clear();
+        adjacency.resize(2 * self.ends.len(), (0, 0));
         for (k, &[i, j]) in self.ends.iter().enumerate() {
             adjacency[cursor[i as usize] as usize] = (k as u32, j);
             cursor[i as usize] += 1;

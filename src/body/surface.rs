@@ -120,10 +120,24 @@ fn broken_edges(topology: &Topology, fracture: Option<&Fracture>) -> Vec<u32> {
 
 /// One spring per unbroken edge, with rest length `|X_a - X_b|` from the rest positions.
 pub(crate) fn build_springs(topology: &Topology, fracture: Option<&Fracture>, rest: &[Vec3]) -> Springs {
+    rebuild_springs(topology, fracture, rest, Springs::default())
+}
+
+/// [`build_springs`] into the buffers of `springs` (the springs before a topology change): a
+/// crack rebuilds all of them, and new buffers of that size (0.8 MB on the issue-5 balloon) are
+/// fresh pages the rebuild then faults in one by one.
+pub(crate) fn rebuild_springs(
+    topology: &Topology,
+    fracture: Option<&Fracture>,
+    rest: &[Vec3],
+    mut springs: Springs,
+) -> Springs {
     let broken = broken_edges(topology, fracture);
     let count = topology.edges.len() - broken.len();
-    let mut springs =
-        Springs { ends: Vec::with_capacity(count), rest: Vec::with_capacity(count), ..Default::default() };
+    springs.ends.clear();
+    springs.rest.clear();
+    springs.ends.reserve(count);
+    springs.rest.reserve(count);
     let mut next_broken = broken.iter().peekable();
     for (e, &[a, b]) in topology.edges.iter().enumerate() {
         if next_broken.next_if_eq(&&(e as u32)).is_some() {
@@ -150,6 +164,9 @@ mod tests {
         let rest: Vec<Vec3> = (0..nu * nv).map(|k| Vec3::new(k as f32, (k * k % 7) as f32, 0.5 * k as f32)).collect();
         let topology = Topology::build(&triangles, rest.len());
         let mut state = 99u32;
+        // Each round's springs are rebuilt into the buffers of the round before (as a crack
+        // does): the same springs as a new build.
+        let mut previous = build_springs(&topology, None, &rest);
         for round in 0..50 {
             let mut fracture = Fracture::new(rest.len(), triangles.len());
             for bits in &mut fracture.broken {
@@ -157,6 +174,13 @@ mod tests {
                 *bits = if (state >> 16) % 4 == 0 { ((state >> 20) % 8) as u8 } else { 0 };
             }
             let springs = build_springs(&topology, Some(&fracture), &rest);
+            let reused = rebuild_springs(&topology, Some(&fracture), &rest, std::mem::take(&mut previous));
+            assert_eq!(
+                (&reused.ends, &reused.rest, &reused.offsets, &reused.adjacency),
+                (&springs.ends, &springs.rest, &springs.offsets, &springs.adjacency),
+                "round {round}"
+            );
+            previous = reused;
             let expected: Vec<[u32; 2]> = (0..topology.edges.len() as u32)
                 .filter(|&e| !edge_is_broken(&topology, Some(&fracture), e))
                 .map(|e| topology.edges[e as usize])
