@@ -407,10 +407,13 @@ fn assemble_vertex(
         let sign = if (i as u32) < j { 1.0 } else { -1.0 };
         f += Vec3A::from(t.force) * sign;
         kv += t.kv * sign;
-        row.set(k, t.coupling, j);
-        let w = t.coupling.w();
+        // The block as the coupling slices store it (bfloat16), for the diagonal too: the
+        // matrix is then exactly that of the rounded springs (see `coupling_slices`).
+        let coupling = t.coupling.rounded();
+        row.set(k, coupling, j);
+        let w = coupling.w();
         diag += outer(w, w);
-        diag_scalar += t.coupling.0.w;
+        diag_scalar += coupling.0.w;
         magnitude += (model.settings.spring_stiffness * t.extension).abs();
     }
     row.finish(around.len());
