@@ -57,6 +57,26 @@ impl Coupling {
     /// assembly builds the diagonal from this, see the module doc).
     #[inline(always)]
     pub fn rounded(self) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            // `to_bf16` then `from_bf16` on the four lanes at once with SSE2 (part of x86-64):
+            // the assembly rounds two blocks per spring, one lane at a time this was 5% of the
+            // instructions of a step (cachegrind).
+            use std::arch::x86_64::*;
+            let v = __m128::from(self.0);
+            // SAFETY: SSE2 is always present on x86-64.
+            let r = unsafe {
+                let bits = _mm_castps_si128(v);
+                let odd = _mm_and_si128(_mm_srli_epi32::<16>(bits), _mm_set1_epi32(1));
+                let sum = _mm_add_epi32(bits, _mm_add_epi32(_mm_set1_epi32(0x7FFF), odd));
+                let rounded = _mm_castsi128_ps(_mm_and_si128(sum, _mm_set1_epi32(0xFFFF_0000u32 as i32)));
+                let nan = _mm_cmpunord_ps(v, v);
+                let quiet = _mm_castsi128_ps(_mm_set1_epi32(0x7FC0_0000));
+                _mm_or_ps(_mm_and_ps(nan, quiet), _mm_andnot_ps(nan, rounded))
+            };
+            Coupling(Vec4::from(r))
+        }
+        #[cfg(not(target_arch = "x86_64"))]
         Coupling(Vec4::from_array(self.0.to_array().map(|v| from_bf16(to_bf16(v)))))
     }
 
@@ -492,6 +512,16 @@ mod tests {
         assert!(from_bf16(to_bf16(f32::NAN)).is_nan());
         let c = Coupling::new(Vec3A::new(0.6, 0.0, 0.8), 12.345, 67.89).rounded();
         assert_eq!(c, c.rounded());
+        // The four-lane rounding of a block is the one-lane rounding of each lane.
+        let mut y = 0.7319f32;
+        for _ in 0..500 {
+            let c = Coupling(Vec4::new(y, -y * 3.1, y * 1e-20, 1.0 / y));
+            let lanes = c.0.to_array().map(|v| from_bf16(to_bf16(v)).to_bits());
+            assert_eq!(c.rounded().0.to_array().map(f32::to_bits), lanes, "{c:?}");
+            y *= -1.0731;
+        }
+        let c = Coupling(Vec4::new(f32::NAN, f32::INFINITY, -0.0, 1.0)).rounded().0;
+        assert!(c.x.is_nan() && c.y == f32::INFINITY && c.z.to_bits() == (-0.0f32).to_bits() && c.w == 1.0);
     }
 
     #[test]
