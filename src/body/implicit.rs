@@ -106,12 +106,13 @@ pub(crate) struct ImplicitScratch {
     gas_partial: Vec<f64>,
     /// Δv of the previous substep (the warm start), reset when the vertex count changes.
     previous_dv: Vec<Vec3A>,
-    /// Contact constraint of each vertex (only with obstacles, and only while one touches),
-    /// and the same in the form the solve reads ([`ContactRows`]: each chunk's normals in the
-    /// first slots of its own rows).
-    contact: Vec<ContactFilter>,
+    /// The contact constraints of the substep (allocated only with obstacles, rewritten by
+    /// every assembly): per vertex its slot (u32::MAX: free), and per slot the contact's normal
+    /// and the normal speed it takes away (the friction bound); each chunk's contacts fill the
+    /// first slots of its own rows. The solve reads them as [`ContactRows`].
     contact_slot: Vec<u32>,
     contact_normal: Vec<Vec3A>,
+    contact_pushed: Vec<f32>,
     /// The coarse level of the preconditioner (made on the first substep) and the substep
     /// length it was made (or tried) for.
     coarse: Option<CoarseSpace>,
@@ -191,7 +192,7 @@ impl ImplicitScratch {
                 + self.ap.capacity()
                 + self.previous_dv.capacity())
                 * 16
-            + self.contact.capacity() * std::mem::size_of::<ContactFilter>()
+            + self.contact_pushed.capacity() * 4
             + self.contact_slot.capacity() * 4
             + self.contact_normal.capacity() * 16
             + self.couplings.memory_bytes()
@@ -273,9 +274,9 @@ struct AssemblyTask<'a> {
     /// The start of the solve: Δv (the warm start) and the contact filters (empty without
     /// obstacles).
     dv: &'a mut [Vec3A],
-    contact: &'a mut [ContactFilter],
     contact_slot: &'a mut [u32],
     contact_normal: &'a mut [Vec3A],
+    contact_pushed: &'a mut [f32],
     /// Over the chunk: `Σ g·Δv` per gas fragment (the start of the solve).
     gas: &'a mut [f64],
 }
@@ -315,13 +316,13 @@ fn assemble_chunk(
         if let Some(frag) = sys.fragment(i) {
             run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(dv) as f64);
         }
-        if let Some(slot) = t.contact.get_mut(k) {
-            *slot = filter;
-            any_contact |= filter != ContactFilter::Free;
-            t.contact_slot[k] = match filter {
+        if let Some(slot) = t.contact_slot.get_mut(k) {
+            *slot = match filter {
                 ContactFilter::Free => u32::MAX,
-                ContactFilter::Slide(normal, _) => {
+                ContactFilter::Slide(normal, pushed) => {
+                    any_contact = true;
                     t.contact_normal[contacts] = normal.into();
+                    t.contact_pushed[contacts] = pushed;
                     contacts += 1;
                     (t.first + contacts - 1) as u32
                 }
@@ -723,9 +724,9 @@ struct Shared<'a> {
     couplings: SharedSlice<'a, CouplingGroup>,
     rhs: SharedSlice<'a, Vec3A>,
     inv_diag: SharedSlice<'a, Mat3A>,
-    contact: SharedSlice<'a, ContactFilter>,
     contact_slot: SharedSlice<'a, u32>,
     contact_normal: SharedSlice<'a, Vec3A>,
+    contact_pushed: SharedSlice<'a, f32>,
     terms: SharedSlice<'a, SpringTerms>,
     dv: SharedSlice<'a, Vec3A>,
     r: SharedSlice<'a, Vec3A>,
@@ -1164,11 +1165,10 @@ pub(crate) fn substep(
         s.previous_dv.clear();
         s.previous_dv.resize(n, g);
     }
-    s.contact.clear();
     if !obstacles.is_empty() {
-        s.contact.resize(n, ContactFilter::Free);
         s.contact_slot.resize(n, u32::MAX);
         s.contact_normal.resize(n, Vec3A::ZERO);
+        s.contact_pushed.resize(n, 0.0);
     }
     let fragments = s.gas_dot.len();
     let chunks = n.div_ceil(CHUNK);
@@ -1202,9 +1202,9 @@ pub(crate) fn substep(
         couplings: SharedSlice::new(&mut s.couplings.groups),
         rhs: SharedSlice::new(&mut s.rhs),
         inv_diag: SharedSlice::new(&mut s.inv_diag),
-        contact: SharedSlice::new(&mut s.contact),
         contact_slot: SharedSlice::new(&mut s.contact_slot),
         contact_normal: SharedSlice::new(&mut s.contact_normal),
+        contact_pushed: SharedSlice::new(&mut s.contact_pushed),
         terms: SharedSlice::new(&mut s.spring_terms),
         dv: SharedSlice::new(&mut s.dv),
         r: SharedSlice::new(&mut s.r),
@@ -1322,7 +1322,7 @@ pub(crate) fn substep(
         });
         team.barrier();
     };
-    let (iterations, any_contact) = pool.team(|team| {
+    let (iterations, _) = pool.team(|team| {
         if gradient_in_team && !reuse {
             gradient_pass(team, &gas_origin);
         }
@@ -1372,9 +1372,9 @@ pub(crate) fn substep(
                         rhs: shared.rhs.part(rows.clone()),
                         inv_diag: shared.inv_diag.part(rows.clone()),
                         dv: shared.dv.part(rows.clone()),
-                        contact: if has_contact { shared.contact.part(rows.clone()) } else { &mut [] },
                         contact_slot: if has_contact { shared.contact_slot.part(rows.clone()) } else { &mut [] },
-                        contact_normal: if has_contact { shared.contact_normal.part(rows) } else { &mut [] },
+                        contact_normal: if has_contact { shared.contact_normal.part(rows.clone()) } else { &mut [] },
+                        contact_pushed: if has_contact { shared.contact_pushed.part(rows) } else { &mut [] },
                         gas: shared.gas.part(gas_rows(c)),
                     }
                 };
@@ -1423,7 +1423,14 @@ pub(crate) fn substep(
         };
         // SAFETY: from here on each member reads and writes only the rows of its own chunks (Δv
         // is no longer written by anyone, the contacts by nobody).
-        let (contact, dv) = unsafe { (if any_contact { shared.contact.whole() } else { &[][..] }, shared.dv.whole()) };
+        let (contact, pushed, dv) = unsafe {
+            if any_contact {
+                let contact = ContactRows { slot: shared.contact_slot.whole(), normal: shared.contact_normal.whole() };
+                (contact, shared.contact_pushed.whole(), shared.dv.whole())
+            } else {
+                (ContactRows::default(), &[][..], shared.dv.whole())
+            }
+        };
         // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling
         // term of the matrix sums to zero); a truncated solve leaves a small error there, removed
         // by a uniform correction. Not with pins or contacts: their reactions are external
@@ -1471,7 +1478,8 @@ pub(crate) fn substep(
                 }
                 let v = &mut v[k];
                 *v += Vec3::from(dvi);
-                if let Some(&ContactFilter::Slide(normal, pushed)) = contact.get(i) {
+                if let Some(slot) = contact.slot.get(i).filter(|&&slot| slot != u32::MAX) {
+                    let (normal, pushed) = (Vec3::from(contact.normal[*slot as usize]), pushed[*slot as usize]);
                     // SPEC 2.3 Coulomb friction on a sliding contact: the tangential speed drops
                     // by at most `friction` times the normal speed change, never past zero.
                     let tangential = *v - normal * v.dot(normal);
@@ -1512,9 +1520,6 @@ pub(crate) fn substep(
         }
         (iterations, any_contact)
     });
-    if !any_contact {
-        s.contact.clear();
-    }
     s.all_finite = s.sums.finite.iter().all(|&f| f);
     if prepare {
         s.prepared = Some(now);
