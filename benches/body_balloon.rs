@@ -171,6 +171,12 @@ fn volume_factor(positions: &[f32], triangles: &[u32]) -> f64 {
     v / 6.0 / (4.0 / 3.0 * std::f64::consts::PI)
 }
 
+/// Whether BODY_ONLY=`only` selects the run `name`: its name contains `only`, or with a leading
+/// "=" is exactly the rest.
+fn selected(only: &str, name: &str) -> bool {
+    only.strip_prefix('=').map_or(name.contains(only), |exact| name == exact)
+}
+
 fn main() {
     let quick = std::env::args().any(|a| a == "quick");
     let steps = if quick { 200 } else { 600 };
@@ -209,7 +215,7 @@ fn main() {
     };
     // BODY_ONLY (below) also skips this run unless its name matches.
     let only = std::env::var("BODY_ONLY").ok();
-    if only.as_deref().is_none_or(|o| "zero gravity, implicit Euler".contains(o)) {
+    if only.as_deref().is_none_or(|o| selected(o, "zero gravity, implicit Euler")) {
         let r = run(&positions, &triangles, &zero_g, steps);
         println!(
             "zero gravity, implicit Euler: settled V/V0 {:.4} (analytic 1.0500, error {:+.2}%), {:.2} ms/step, {:.1} CG iterations/step{}",
@@ -248,7 +254,7 @@ fn main() {
     // BODY_ONLY==<name> only the row of exactly that name;
     // BODY_ONLY=cracking runs only the cracking measurement.
     for (name, integrator, substeps, iterations, h) in configs {
-        if only.as_deref().is_some_and(|o| o.strip_prefix('=').map_or(!name.contains(o), |exact| name != exact)) {
+        if only.as_deref().is_some_and(|o| !selected(o, name)) {
             continue;
         }
         let mut d = base;

@@ -50,16 +50,16 @@ ours=$(cargo bench --bench body_balloon --no-run --message-format=json 2>/dev/nu
   grep -o '"executable":"[^"]*body_balloon[^"]*"' | tail -n 1 | cut -d'"' -f4)
 [ -x "$ours" ] || { echo "could not build or find the body_balloon bench" >&2; exit 1; }
 
-# BODY_ONLY (body_balloon.rs) runs the rows whose name contains the text, or with a leading
-# "=" the row of exactly that name: here the default 2-thread row alone (no zero-gravity run,
-# no cracking measurement). The rows print: name, ms/step, V/V0, min, max, CG it., "p10, median; CPU".
+# BODY_ONLY (body_balloon.rs) runs the rows whose name contains the text (with a leading "="
+# only the row of exactly that name): here the default 2-thread row and its 1-thread twin, no
+# zero-gravity run and no cracking measurement. The rows print: name, ms/step, V/V0, min, max, CG it., "p10, median; CPU".
 row() { # the numbers after the row name $1 (exact name) in the bench output on stdin
   awk -v name="$1" 'index($0, name) == 1 && substr($0, length(name) + 1, 1) == " " {
     print substr($0, length(name) + 1) }' | tr -d ',;'
 }
 
 printf 'machine: %s cores, load average %s\n' "$(nproc)" "$(cut -d' ' -f1-3 /proc/loadavg)"
-if [ -n "$zerog" ]; then only="zero gravity"; else only="=implicit Euler (default)"; fi
+if [ -n "$zerog" ]; then only="zero gravity"; else only="implicit Euler (default)"; fi
 printf 'Bullet: %s %s; ours: %s (BODY_ONLY="%s")%s\n\n' "$bullet" "$zerog" "$ours" "$only" \
   "${quick:+, quick (200 steps)}"
 printf '%5s | %-26s | %-26s | %-14s | %s\n' round "Bullet (1 thread)" "ours, 2 threads (default)" \
