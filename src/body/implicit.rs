@@ -1538,3 +1538,102 @@ pub(crate) fn substep(
     s.coarse = coarse;
     (power * h as f64, iterations)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every specialisation of the direction pass (coarse level, contacts, gas: each on or off)
+    /// against the plain formula `p = z + F(c) + β p` at every vertex (F the contact filter,
+    /// c the coarse correction, none at a pinned vertex) and `Σ g·p` per fragment.
+    #[test]
+    fn direction_rows_match_the_formula_for_every_combination() {
+        let n = 37;
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut unit = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let mut vec3a = || Vec3A::new(unit(), unit(), unit());
+        let z: Vec<Vec3A> = (0..n).map(|_| vec3a()).collect();
+        let p0: Vec<Vec3A> = (0..n).map(|_| vec3a()).collect();
+        let solution: Vec<Vec3A> = (0..5).map(|_| vec3a()).collect();
+        let gradient: Vec<Vec3> = (0..n).map(|_| Vec3::from(vec3a())).collect();
+        let inv_mass: Vec<f32> = (0..n).map(|k| if k % 7 == 3 { 0.0 } else { 1.0 }).collect();
+        let row_of: Vec<u32> = (0..n).map(|k| (k * 3 % 5) as u32).collect();
+        // Fragments in runs, with vertices of no gas fragment among them.
+        let fragment: Vec<u32> = (0..n).map(|k| if k % 9 == 4 { u32::MAX } else { (k / 10) as u32 % 3 }).collect();
+        // Every fourth vertex touches, its normal in the next free slot.
+        let mut slot = vec![u32::MAX; n];
+        let mut normal = vec![Vec3A::ZERO; n];
+        let mut used = 0;
+        for k in (1..n).step_by(4) {
+            normal[used] = vec3a().normalize();
+            slot[k] = used as u32;
+            used += 1;
+        }
+        let beta = 0.37f32;
+        for coarse in [false, true] {
+            for contact in [false, true] {
+                for gas in [false, true] {
+                    let contacts =
+                        if contact { ContactRows { slot: &slot, normal: &normal } } else { ContactRows::default() };
+                    let mut expected_p = p0.clone();
+                    let mut expected_gas = vec![0.0f64; 3];
+                    for k in 0..n {
+                        let mut zi = z[k];
+                        if coarse && inv_mass[k] > 0.0 {
+                            let c = solution[row_of[k] as usize];
+                            zi += if contact { contacts.apply(k, c) } else { c };
+                        }
+                        expected_p[k] = zi + p0[k] * beta;
+                        if gas && fragment[k] != u32::MAX {
+                            expected_gas[fragment[k] as usize] += Vec3A::from(gradient[k]).dot(expected_p[k]) as f64;
+                        }
+                    }
+                    let mut p = p0.clone();
+                    let mut sums = vec![0.0f64; 3];
+                    let coarse_rows = if coarse { (&row_of[..], &solution[..]) } else { (&[][..], &[][..]) };
+                    let gas_rows = if gas { (&fragment[..], &gradient[..]) } else { (&[][..], &[][..]) };
+                    let args = (&mut p, &z[..], &inv_mass[..], coarse_rows, contacts, gas_rows, beta, &mut sums[..]);
+                    match (coarse, contact, gas) {
+                        (false, _, false) => direction_rows::<false, false, false>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                        ),
+                        (false, _, true) => direction_rows::<false, false, true>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                        ),
+                        (true, false, false) => direction_rows::<true, false, false>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                        ),
+                        (true, false, true) => direction_rows::<true, false, true>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                        ),
+                        (true, true, false) => direction_rows::<true, true, false>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                        ),
+                        (true, true, true) => direction_rows::<true, true, true>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                        ),
+                    }
+                    let case = format!("coarse {coarse}, contact {contact}, gas {gas}");
+                    // Without the coarse level the contacts are not read (z is filtered already).
+                    assert_eq!(p, expected_p, "{case}");
+                    for (got, want) in sums.iter().zip(&expected_gas) {
+                        assert!((got - want).abs() <= 1e-9 * (1.0 + want.abs()), "{case}: {got} vs {want}");
+                    }
+                    assert_eq!(sums.iter().any(|&s| s != 0.0), gas, "{case}");
+                    if contact && coarse {
+                        // The filter took the normal part off the correction at touching vertices.
+                        let k = 5;
+                        let c = solution[row_of[k] as usize];
+                        let n = normal[slot[k] as usize];
+                        assert!(((p[k] - z[k] - p0[k] * beta) - (c - n * c.dot(n))).length() < 1e-6, "{case}");
+                    }
+                }
+            }
+        }
+    }
+}
