@@ -1568,11 +1568,9 @@ mod tests {
         // Every fourth vertex touches, its normal in the next free slot.
         let mut slot = vec![u32::MAX; n];
         let mut normal = vec![Vec3A::ZERO; n];
-        let mut used = 0;
-        for k in (1..n).step_by(4) {
+        for (used, k) in (1..n).step_by(4).enumerate() {
             normal[used] = vec3a().normalize();
             slot[k] = used as u32;
-            used += 1;
         }
         let beta = 0.37f32;
         for coarse in [false, true] {
@@ -1594,7 +1592,7 @@ mod tests {
                         }
                     }
                     let mut p = p0.clone();
-                    let mut sums = vec![0.0f64; 3];
+                    let mut sums = [0.0f64; 3];
                     let coarse_rows = if coarse { (&row_of[..], &solution[..]) } else { (&[][..], &[][..]) };
                     let gas_rows = if gas { (&fragment[..], &gradient[..]) } else { (&[][..], &[][..]) };
                     let args = (&mut p, &z[..], &inv_mass[..], coarse_rows, contacts, gas_rows, beta, &mut sums[..]);
