@@ -434,14 +434,7 @@ mod tests {
     /// with a row-by-row sum up to rounding, and every row is reported once, in order.
     #[test]
     fn sliced_sums_agree_with_row_by_row_sums() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
-        let mut unit = || (next() >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0;
+        let mut unit = crate::body::test_randoms(0x2545_f491_4f6c_dd1d);
         let n = 101;
         let mut row_offsets = vec![0u32];
         let mut rows: Vec<Vec<(Coupling, u32)>> = Vec::new();

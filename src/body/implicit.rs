@@ -1549,13 +1549,7 @@ mod tests {
     #[test]
     fn direction_rows_match_the_formula_for_every_combination() {
         let n = 37;
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut unit = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut unit = crate::body::test_randoms(0x9e37_79b9_7f4a_7c15);
         let mut vec3a = || Vec3A::new(unit(), unit(), unit());
         let z: Vec<Vec3A> = (0..n).map(|_| vec3a()).collect();
         let p0: Vec<Vec3A> = (0..n).map(|_| vec3a()).collect();

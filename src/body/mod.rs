@@ -32,6 +32,19 @@ mod surface;
 mod wind;
 mod xpbd;
 
+/// The unit tests' random numbers: uniform in [-1, 1) from an xorshift64 generator started at
+/// `seed` (the same sequence on every machine).
+#[cfg(test)]
+fn test_randoms(seed: u64) -> impl FnMut() -> f32 {
+    let mut seed = seed;
+    move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    }
+}
+
 pub use obstacles::Obstacle;
 pub use settings::{BodySettings, Integrator};
 pub use simulator::{Body, BodyStats};

@@ -228,13 +228,7 @@ mod tests {
     /// time, from any first spring.
     #[test]
     fn eight_at_a_time_is_bitwise_one_at_a_time() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut unit = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut unit = crate::body::test_randoms(0x9e37_79b9_7f4a_7c15);
         let n = 50;
         let x: Vec<Vec3> = (0..n).map(|_| Vec3::new(unit(), unit(), unit())).collect();
         let v: Vec<Vec3> = (0..n).map(|_| Vec3::new(unit(), unit(), unit()) * 3.0).collect();
