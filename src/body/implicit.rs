@@ -1322,7 +1322,7 @@ pub(crate) fn substep(
         });
         team.barrier();
     };
-    let (iterations, _) = pool.team(|team| {
+    let iterations = pool.team(|team| {
         if gradient_in_team && !reuse {
             gradient_pass(team, &gas_origin);
         }
@@ -1518,7 +1518,7 @@ pub(crate) fn substep(
                 terms_pass(team, x, v, (vertex_fragment, unsafe { gradient.whole() }), true);
             }
         }
-        (iterations, any_contact)
+        iterations
     });
     s.all_finite = s.sums.finite.iter().all(|&f| f);
     if prepare {
