@@ -201,6 +201,11 @@ fn main() {
         d.ground_height = 0.0;
         d.friction = 0.5;
         d.threads = 2;
+        // BODY_THREADS=<n>: every row on n threads (a single-threaded zero-gravity run, say, for
+        // cachegrind, whose counts are exact only without threads spinning at barriers).
+        if let Some(t) = std::env::var("BODY_THREADS").ok().and_then(|v| v.parse().ok()) {
+            d.threads = t;
+        }
         if let Some(it) = std::env::var("BODY_ITERATIONS").ok().and_then(|v| v.parse().ok()) {
             d.iterations = it;
         }

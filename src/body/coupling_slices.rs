@@ -17,8 +17,9 @@
 //!
 //! The blocks are stored in bfloat16 (the upper half of an f32: its exponent range, 8 bits of
 //! precision), 96 bytes a group instead of 160: the products of a step stream the couplings
-//! again at every iteration and are bound by those bytes. The assembly rounds each block first
-//! ([`Coupling::rounded`]) and builds the diagonal from the rounded blocks, so the matrix the
+//! again at every iteration and are bound by those bytes. The spring terms round each block
+//! once ([`Coupling::packed`]) and the assembly builds the diagonal from the rounded blocks
+//! ([`PackedCoupling::unpacked`]), so the matrix the
 //! solve uses is exactly that of springs whose blocks moved by at most 0.4%: still symmetric,
 //! positive definite and blind to rigid translations (every row's blocks sum to its diagonal's
 //! spring part). That changes the linearisation of the step, not its forces (the right side),
@@ -53,31 +54,18 @@ impl Coupling {
         self.0.w
     }
 
-    /// The block with `w` and `alpha` rounded to bfloat16 (what the groups store; the
-    /// assembly builds the diagonal from this, see the module doc).
+    /// The block with `w` and `alpha` rounded to bfloat16, as the groups store it (the
+    /// spring terms make their blocks so; the assembly builds the diagonal from them, see the
+    /// module doc).
     #[inline(always)]
+    pub fn packed(self) -> PackedCoupling {
+        PackedCoupling(self.0.to_array().map(to_bf16))
+    }
+
+    /// The block with `w` and `alpha` rounded to bfloat16 (the f32 of [`Coupling::packed`]).
+    #[cfg(test)]
     pub fn rounded(self) -> Self {
-        #[cfg(target_arch = "x86_64")]
-        {
-            // `to_bf16` then `from_bf16` on the four lanes at once with SSE2 (part of x86-64):
-            // the assembly rounds two blocks per spring, one lane at a time this was 5% of the
-            // instructions of a step (cachegrind).
-            use std::arch::x86_64::*;
-            let v = __m128::from(self.0);
-            // SAFETY: SSE2 is always present on x86-64.
-            let r = unsafe {
-                let bits = _mm_castps_si128(v);
-                let odd = _mm_and_si128(_mm_srli_epi32::<16>(bits), _mm_set1_epi32(1));
-                let sum = _mm_add_epi32(bits, _mm_add_epi32(_mm_set1_epi32(0x7FFF), odd));
-                let rounded = _mm_castsi128_ps(_mm_and_si128(sum, _mm_set1_epi32(0xFFFF_0000u32 as i32)));
-                let nan = _mm_cmpunord_ps(v, v);
-                let quiet = _mm_castsi128_ps(_mm_set1_epi32(0x7FC0_0000));
-                _mm_or_ps(_mm_and_ps(nan, quiet), _mm_andnot_ps(nan, rounded))
-            };
-            Coupling(Vec4::from(r))
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        Coupling(Vec4::from_array(self.0.to_array().map(|v| from_bf16(to_bf16(v)))))
+        self.packed().unpacked()
     }
 
     /// The block times `d` (the tests' reference).
@@ -102,6 +90,34 @@ pub(crate) fn to_bf16(v: f32) -> u16 {
 #[inline(always)]
 pub(crate) fn from_bf16(h: u16) -> f32 {
     f32::from_bits((h as u32) << 16)
+}
+
+/// A coupling block in bfloat16 (`w` in x, y, z, `alpha` last; 8 bytes): what the groups store,
+/// made once per spring by the spring terms, which the assembly then copies into both ends'
+/// rows (it converted two 16-byte blocks per spring before, a third of its instructions).
+#[derive(Clone, Copy, Default, Debug, PartialEq, Eq)]
+#[repr(transparent)]
+pub(crate) struct PackedCoupling(pub [u16; 4]);
+
+impl PackedCoupling {
+    /// The f32 block (exact).
+    #[inline(always)]
+    pub fn unpacked(self) -> Coupling {
+        #[cfg(target_arch = "x86_64")]
+        {
+            // The four halves widened into the upper halves of four f32 lanes at once with SSE2
+            // (part of x86-64).
+            use std::arch::x86_64::*;
+            // SAFETY: SSE2 is always present on x86-64; an unaligned 8-byte load of the array.
+            let v = unsafe {
+                let h = _mm_loadl_epi64(self.0.as_ptr() as *const __m128i);
+                _mm_castsi128_ps(_mm_unpacklo_epi16(_mm_setzero_si128(), h))
+            };
+            Coupling(Vec4::from(v))
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        Coupling(Vec4::from_array(self.0.map(from_bf16)))
+    }
 }
 
 /// The `k`-th coupling of each of the eight rows of a slice, `w` and `alpha` in bfloat16 (96
@@ -203,7 +219,7 @@ impl SliceRowsMut<'_> {
     /// Writes the `k`-th coupling of row `row` and its other end.
     #[cfg(test)]
     pub fn set(&mut self, row: usize, k: usize, c: Coupling, other: u32) {
-        self.row(row).set(k, c, other);
+        self.row(row).set(k, c.packed(), other);
     }
 
     /// Pads row `row`'s lanes from its `count`-th coupling to the end of its slice (every row
@@ -234,19 +250,19 @@ pub(crate) struct RowMut<'a> {
 }
 
 impl RowMut<'_> {
-    /// Writes the row's `k`-th coupling (rounded to bfloat16: pass it [`Coupling::rounded`] for
-    /// the matrix to be the one the diagonal was made from) and its other end.
+    /// Writes the row's `k`-th coupling and its other end.
     #[inline(always)]
-    pub fn set(&mut self, k: usize, c: Coupling, other: u32) {
+    pub fn set(&mut self, k: usize, c: PackedCoupling, other: u32) {
         let count = self.groups.len();
         let Some(group) = self.groups.get_mut(k) else {
             panic!("coupling {k} of row {} in a slice of {count}", self.row)
         };
-        let (w, lane) = (c.w(), self.lane % SLICE);
-        group.w[0][lane] = to_bf16(w.x);
-        group.w[1][lane] = to_bf16(w.y);
-        group.w[2][lane] = to_bf16(w.z);
-        group.alpha[lane] = to_bf16(c.alpha());
+        let lane = self.lane % SLICE;
+        let [x, y, z, alpha] = c.0;
+        group.w[0][lane] = x;
+        group.w[1][lane] = y;
+        group.w[2][lane] = z;
+        group.alpha[lane] = alpha;
         group.other[lane] = other;
     }
 

@@ -394,8 +394,7 @@ fn assemble_vertex(
 ) -> (Vec3A, Mat3A, f32) {
     let model = sys.model;
     let h = sys.h;
-    let mut f = Vec3A::from(force);
-    let mut kv = Vec3A::ZERO;
+    let mut rhs = Vec3A::from(force) * h;
     // The diagonal block is `(m + Σ alpha) I + Σ w wᵀ`: the scalar part summed apart.
     let mut diag = Mat3A::ZERO;
     let mut diag_scalar = model.mass[i];
@@ -406,20 +405,18 @@ fn assemble_vertex(
         let t = &terms[spring as usize];
         // `Springs::ends` holds each spring as [lower, higher] vertex.
         let sign = if (i as u32) < j { 1.0 } else { -1.0 };
-        f += Vec3A::from(t.force) * sign;
-        kv += t.kv * sign;
+        rhs += Vec3A::from(t.rhs) * sign;
+        row.set(k, t.coupling, j);
         // The block as the coupling slices store it (bfloat16), for the diagonal too: the
         // matrix is then exactly that of the rounded springs (see `coupling_slices`).
-        let coupling = t.coupling.rounded();
-        row.set(k, coupling, j);
+        let coupling = t.coupling.unpacked();
         let w = coupling.w();
         diag += outer(w, w);
-        diag_scalar += coupling.0.w;
+        diag_scalar += coupling.alpha();
         magnitude += (model.settings.spring_stiffness * t.extension).abs();
     }
     row.finish(around.len());
     diag += Mat3A::from_diagonal(Vec3::splat(diag_scalar));
-    let mut rhs = f * h + kv;
     if let Some(frag) = sys.fragment(i) {
         let g = Vec3A::from(sys.gradient[i]);
         let coef = sys.gas_coef[frag];

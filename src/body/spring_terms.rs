@@ -4,24 +4,29 @@
 
 use glam::{Vec3, Vec3A};
 
-use super::coupling_slices::Coupling;
-use super::springs::{is_degenerate, spring_block_coefficients};
+use super::coupling_slices::{Coupling, PackedCoupling};
+use super::springs::{MIN_LENGTH_RATIO, is_degenerate, spring_block_coefficients};
 
-/// One spring's share of the assembly, seen from its first end (`Springs::ends[k][0]`): the
-/// spring and damping force on it, its `h² K v` term and the coupling block, plus its extension
-/// `L - L0` (for the force scale, and for the energy and strain of the state it was made at). The second end takes the vectors negated (`u` and the velocity
-/// difference both flip sign, so they are exactly the negated values) and the same block, so
-/// each spring is computed once, not once per end.
+/// One spring's share of the assembly, seen from its first end (`Springs::ends[k][0]`): its
+/// share `h F + h² K v` of the right side (spring and damping force F), its coupling block in
+/// bfloat16 as the slices store it, and its extension `L - L0` (for the force scale, and for
+/// the energy and strain of the state it was made at). The second end takes the right side
+/// negated (`u` and the velocity difference both flip sign, so it is exactly the negated
+/// value) and the same block, so each spring is computed once, not once per end.
 ///
-/// 48 bytes (the force unaligned beside the stretch): the assembly gathers these per vertex in
-/// an order that jumps about the array, so their size is what that gather waits on.
+/// 24 bytes: the assembly gathers these per vertex in an order that jumps about the array, so
+/// their size is what that gather waits on. (At 48 bytes, with the force and `h² K v` apart
+/// and the block in f32, the balloon's 30,720 springs took 1.5 MB, more than a core's L2
+/// cache, and the assembly rounded each block twice.)
 #[derive(Clone, Copy, Default, Debug, PartialEq)]
+#[repr(C)]
 pub(crate) struct SpringTerms {
-    pub kv: Vec3A,
-    pub coupling: Coupling,
-    pub force: Vec3,
+    pub rhs: Vec3,
     pub extension: f32,
+    pub coupling: PackedCoupling,
 }
+
+const _: () = assert!(std::mem::size_of::<SpringTerms>() == 24);
 
 /// What the terms of every spring depend on.
 #[derive(Clone, Copy)]
@@ -54,11 +59,12 @@ pub(crate) fn spring_terms(input: &SpringInput, k: usize) -> SpringTerms {
     let along = u.x * dvel.x + u.y * dvel.y + u.z * dvel.z;
     let (a, b) = spring_block_coefficients(len, rest, ks);
     let (alpha, beta) = (h2 * a, h2 * b + h * kd);
+    let force = u * (stretch + kd * along);
+    let kv = (dvel * a + u * (b * along)) * h2;
     SpringTerms {
-        force: (u * (stretch + kd * along)).into(),
-        kv: (dvel * a + u * (b * along)) * h2,
-        coupling: Coupling::new(u, alpha, beta),
+        rhs: (force * h + kv).into(),
         extension: len - rest,
+        coupling: Coupling::new(u, alpha, beta).packed(),
     }
 }
 
@@ -112,6 +118,23 @@ unsafe fn load_points(
         _mm256_shuffle_ps::<0xEE>(xy01, xy23),
         _mm256_shuffle_ps::<0x44>(zw01, zw23),
     ))
+}
+
+/// Eight f32 rounded to bfloat16 as `coupling_slices::to_bf16` rounds one (ties to even, a NaN
+/// to 0x7FC0), each in the low half of its 32-bit lane.
+///
+/// # Safety
+/// The processor must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn bf16_lanes(v: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256i {
+    use std::arch::x86_64::*;
+    let bits = _mm256_castps_si256(v);
+    let odd = _mm256_and_si256(_mm256_srli_epi32::<16>(bits), _mm256_set1_epi32(1));
+    let rounded = _mm256_srli_epi32::<16>(_mm256_add_epi32(bits, _mm256_add_epi32(_mm256_set1_epi32(0x7FFF), odd)));
+    let nan = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_UNORD_Q>(v, v));
+    _mm256_or_si256(_mm256_and_si256(nan, _mm256_set1_epi32(0x7FC0)), _mm256_andnot_si256(nan, rounded))
 }
 
 /// [`spring_terms_range`] with AVX2 (no fused multiply-adds: the same roundings as the scalar
@@ -182,38 +205,65 @@ unsafe fn spring_terms_avx2(input: &SpringInput, first: usize, out: &mut [Spring
         let root = _mm256_sqrt_ps(_mm256_max_ps(beta, _mm256_setzero_ps()));
         let push = _mm256_add_ps(stretch, _mm256_mul_ps(_mm256_set1_ps(kd), along));
         let b_along = _mm256_mul_ps(b, along);
-        let kv =
-            |w: __m256, u: __m256| _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(w, a), _mm256_mul_ps(u, b_along)), h2v);
-        let lanes = [
-            _mm256_mul_ps(ux, push),
-            _mm256_mul_ps(uy, push),
-            _mm256_mul_ps(uz, push),
-            kv(wx, ux),
-            kv(wy, uy),
-            kv(wz, uz),
-            _mm256_mul_ps(ux, root),
-            _mm256_mul_ps(uy, root),
-            _mm256_mul_ps(uz, root),
-            alpha,
-            _mm256_sub_ps(len, rest),
-            len,
+        let hv = _mm256_set1_ps(h);
+        // `force * h + kv` per axis, as `spring_terms` computes it.
+        let rhs = |w: __m256, u: __m256| {
+            let kv = _mm256_mul_ps(_mm256_add_ps(_mm256_mul_ps(w, a), _mm256_mul_ps(u, b_along)), h2v);
+            _mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(u, push), hv), kv)
+        };
+        // A degenerate spring (`is_degenerate`: `len <= ratio rest`, false for NaN) keeps only
+        // its extension.
+        let degenerate = _mm256_cmp_ps::<_CMP_LE_OQ>(len, _mm256_mul_ps(_mm256_set1_ps(MIN_LENGTH_RATIO), rest));
+        let keep = |v: __m256| _mm256_andnot_ps(degenerate, v);
+        let (rx, ry, rz, extension) =
+            (keep(rhs(wx, ux)), keep(rhs(wy, uy)), keep(rhs(wz, uz)), _mm256_sub_ps(len, rest));
+        // SAFETY: AVX2 (this function's contract).
+        let [cx, cy, cz, ca] = unsafe {
+            [
+                bf16_lanes(_mm256_mul_ps(ux, root)),
+                bf16_lanes(_mm256_mul_ps(uy, root)),
+                bf16_lanes(_mm256_mul_ps(uz, root)),
+                bf16_lanes(alpha),
+            ]
+        };
+        // Each spring's 24 bytes: (rhs, extension) transposed four lanes at a time into 16-byte
+        // rows, then the block's four halves as one u64 (x, y in its low u32, z, alpha in its
+        // high one, little-endian: the order of `PackedCoupling`).
+        let t0 = _mm256_unpacklo_ps(rx, ry); // x0 y0 x1 y1 | x4 y4 x5 y5
+        let t1 = _mm256_unpackhi_ps(rx, ry); // x2 y2 x3 y3 | x6 y6 x7 y7
+        let t2 = _mm256_unpacklo_ps(rz, extension);
+        let t3 = _mm256_unpackhi_ps(rz, extension);
+        let rows = [
+            _mm256_shuffle_ps::<0x44>(t0, t2), // spring 0 | spring 4
+            _mm256_shuffle_ps::<0xEE>(t0, t2), // 1 | 5
+            _mm256_shuffle_ps::<0x44>(t1, t3), // 2 | 6
+            _mm256_shuffle_ps::<0xEE>(t1, t3), // 3 | 7
         ];
-        let mut v = [[0f32; 8]; 12];
-        for (to, from) in v.iter_mut().zip(lanes) {
-            // SAFETY: an unaligned store into eight local f32.
-            unsafe { _mm256_storeu_ps(to.as_mut_ptr(), from) };
-        }
-        for (l, t) in out[k..k + 8].iter_mut().enumerate() {
-            *t = if is_degenerate(v[11][l], input.rest[s + l]) {
-                SpringTerms { extension: v[10][l], ..SpringTerms::default() }
-            } else {
-                SpringTerms {
-                    force: Vec3::new(v[0][l], v[1][l], v[2][l]),
-                    kv: Vec3A::new(v[3][l], v[4][l], v[5][l]),
-                    coupling: Coupling(glam::Vec4::new(v[6][l], v[7][l], v[8][l], v[9][l])),
-                    extension: v[10][l],
-                }
-            };
+        let drop = _mm256_castps_si256(degenerate);
+        let xy = _mm256_andnot_si256(drop, _mm256_or_si256(cx, _mm256_slli_epi32::<16>(cy)));
+        let za = _mm256_andnot_si256(drop, _mm256_or_si256(cz, _mm256_slli_epi32::<16>(ca)));
+        let (low, high) = (_mm256_unpacklo_epi32(xy, za), _mm256_unpackhi_epi32(xy, za)); // 0 1 | 4 5, 2 3 | 6 7
+        let blocks = [
+            _mm256_extract_epi64::<0>(low),
+            _mm256_extract_epi64::<1>(low),
+            _mm256_extract_epi64::<0>(high),
+            _mm256_extract_epi64::<1>(high),
+            _mm256_extract_epi64::<2>(low),
+            _mm256_extract_epi64::<3>(low),
+            _mm256_extract_epi64::<2>(high),
+            _mm256_extract_epi64::<3>(high),
+        ];
+        let records = out[k..k + 8].as_mut_ptr();
+        for (lane, &block) in blocks.iter().enumerate() {
+            let row =
+                if lane < 4 { _mm256_castps256_ps128(rows[lane]) } else { _mm256_extractf128_ps::<1>(rows[lane - 4]) };
+            // SAFETY: `records` points at eight 24-byte `SpringTerms` (repr(C): rhs, extension
+            // in the first 16 bytes, the block in the last 8), written unaligned.
+            unsafe {
+                let record = records.add(lane) as *mut u8;
+                _mm_storeu_ps(record as *mut f32, row);
+                std::ptr::write_unaligned(record.add(16) as *mut i64, block);
+            }
         }
         k += 8;
     }
@@ -222,6 +272,47 @@ unsafe fn spring_terms_avx2(input: &SpringInput, first: usize, out: &mut [Spring
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Eight lanes at a time round as `to_bf16` rounds one: ties to even, subnormals, infinities,
+    /// signed zeros and NaN.
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn eight_lane_bfloat16_is_the_scalar_rounding() {
+        use super::super::coupling_slices::to_bf16;
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut unit = crate::body::test_randoms(0x1234_5678_9abc_def1);
+        let mut values = vec![
+            f32::NAN,
+            -f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.0,
+            -0.0,
+            f32::MAX,
+            f32::MIN_POSITIVE / 3.0,
+            1.0 + 2f32.powi(-8),
+            1.0 + 3.0 * 2f32.powi(-8),
+            -(1.0 + 2f32.powi(-8)),
+        ];
+        values.extend((0..3000).map(|k| unit() * 10f32.powi(k % 30 - 15)));
+        while values.len() % 8 != 0 {
+            values.push(1.5);
+        }
+        for lanes in values.chunks_exact(8) {
+            let mut got = [0u32; 8];
+            // SAFETY: AVX2 (checked above); eight f32 loaded, eight u32 stored.
+            unsafe {
+                use std::arch::x86_64::*;
+                let v = _mm256_loadu_ps(lanes.as_ptr());
+                _mm256_storeu_si256(got.as_mut_ptr() as *mut __m256i, bf16_lanes(v));
+            }
+            for (value, got) in lanes.iter().zip(got) {
+                assert_eq!(got, to_bf16(*value) as u32, "{value:e}");
+            }
+        }
+    }
 
     /// Random springs (some of them degenerate, some compressed, some touching the last vertex,
     /// and a count that leaves a tail): the eight-at-a-time terms are the same bits as one at a
@@ -248,17 +339,16 @@ mod tests {
         let input =
             SpringInput { ends: &ends, rest: &rest, x: &x, v: &v, stiffness: 1234.5, damping: 6.7, h: 1.0 / 60.0 };
         let expected: Vec<SpringTerms> = (0..ends.len()).map(|k| spring_terms(&input, k)).collect();
-        assert!(expected.iter().any(|t| t.coupling == Coupling::default()), "a degenerate spring is in the test");
-        assert!(expected.iter().filter(|t| t.coupling.w().length() > 0.0).count() > 150);
+        assert!(expected.iter().any(|t| t.coupling == PackedCoupling::default()), "a degenerate spring is in the test");
+        assert!(expected.iter().filter(|t| t.coupling.unpacked().w().length() > 0.0).count() > 150);
         for first in [0, 3, 8] {
             let mut out = vec![SpringTerms::default(); ends.len() - first];
             spring_terms_range(&input, first, &mut out);
             for (k, (got, want)) in out.iter().zip(&expected[first..]).enumerate() {
                 let bits = |t: &SpringTerms| {
                     let mut all = Vec::new();
-                    all.extend(t.kv.to_array().map(f32::to_bits));
-                    all.extend(t.coupling.0.to_array().map(f32::to_bits));
-                    all.extend(t.force.to_array().map(f32::to_bits));
+                    all.extend(t.rhs.to_array().map(f32::to_bits));
+                    all.extend(t.coupling.0.map(u32::from));
                     all.push(t.extension.to_bits());
                     all
                 };

@@ -64,7 +64,7 @@ impl Springs {
 }
 
 /// Lengths below this fraction of the rest length have no direction: no force (degenerate guard).
-const MIN_LENGTH_RATIO: f32 = 1e-6;
+pub(crate) const MIN_LENGTH_RATIO: f32 = 1e-6;
 
 /// SPEC 2.1: force on end i of spring (i, j); the force on j is its opposite.
 /// `f = K_s (|d| - L0) u + K_d ((v_j - v_i)·u) u`, `d = x_j - x_i`, `u = d/|d|`.
