@@ -28,6 +28,7 @@ use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::Gas;
 use super::obstacles::{Obstacle, resolve, touching};
 use super::spring_terms::{SpringInput, SpringTerms, spring_terms_range};
+use super::symmetric_block::SymmetricBlock;
 use crate::parallel::{SharedSlice, Team, WorkerPool};
 
 /// How a vertex in contact with an obstacle is constrained inside the solve (Baraff and Witkin
@@ -96,7 +97,7 @@ pub(crate) struct ImplicitScratch {
     p: Vec<Vec3A>,
     ap: Vec<Vec3A>,
     /// The inverted 3x3 diagonal block of each vertex (the block-Jacobi preconditioner).
-    inv_diag: Vec<Mat3A>,
+    inv_diag: Vec<SymmetricBlock>,
     /// Per chunk of vertices, the sums of the team passes.
     sums: ChunkSums,
     /// Per fragment `h² P/V` (gas rank-one term); `gas_dot` only counts the fragments.
@@ -200,7 +201,7 @@ impl ImplicitScratch {
             + (self.gas_coef.capacity() + self.gas_dot.capacity() + self.gas_partial.capacity()) * 8
             + self.sums.memory_bytes()
             + self.prepared_gas_v.capacity() * 8
-            + self.inv_diag.capacity() * std::mem::size_of::<Mat3A>()
+            + self.inv_diag.capacity() * std::mem::size_of::<SymmetricBlock>()
             + self.coarse.as_ref().map_or(0, CoarseSpace::memory_bytes)
     }
 }
@@ -270,7 +271,7 @@ struct AssemblyTask<'a> {
     first: usize,
     couplings: SliceRowsMut<'a>,
     rhs: &'a mut [Vec3A],
-    inv_diag: &'a mut [Mat3A],
+    inv_diag: &'a mut [SymmetricBlock],
     /// The start of the solve: Δv (the warm start) and the contact filters (empty without
     /// obstacles).
     dv: &'a mut [Vec3A],
@@ -311,7 +312,7 @@ fn assemble_chunk(
         let (rhs, mut inv_diag, magnitude) = assemble_vertex(sys, terms, i, f, gas_dot_v, &mut t.couplings);
         let (dv, filter) = start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, previous_dv[i], &mut inv_diag);
         t.rhs[k] = rhs;
-        t.inv_diag[k] = inv_diag;
+        t.inv_diag[k] = SymmetricBlock::from_mat(inv_diag);
         t.dv[k] = dv;
         if let Some(frag) = sys.fragment(i) {
             run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(dv) as f64);
@@ -535,7 +536,7 @@ fn residual_chunk(
     (dv, r, z): (&mut [Vec3A], &mut [Vec3A], &mut [Vec3A]),
     p: &[Vec3A],
     ap: &[Vec3A],
-    inv_diag: &[Mat3A],
+    inv_diag: &[SymmetricBlock],
     contact: ContactRows,
     alpha: f32,
     any_contact: bool,
@@ -550,7 +551,7 @@ fn residual_chunk(
     for k in 0..n {
         dv[k] += p[k] * alpha;
         let ri = r[k] - ap[k] * alpha;
-        let mut zi = inv_diag[k] * ri;
+        let mut zi = inv_diag[k].apply(ri);
         if any_contact {
             zi = contact.apply(k, zi);
         }
@@ -570,7 +571,7 @@ fn initial_chunk(
     (r, z): (&mut [Vec3A], &mut [Vec3A]),
     rhs: &[Vec3A],
     ap: &[Vec3A],
-    inv_diag: &[Mat3A],
+    inv_diag: &[SymmetricBlock],
     contact: ContactRows,
     any_contact: bool,
 ) -> f64 {
@@ -578,7 +579,7 @@ fn initial_chunk(
     for k in 0..r.len() {
         let i = first + k;
         let mut ri = rhs[i] - ap[k];
-        let mut zi = inv_diag[i] * ri;
+        let mut zi = inv_diag[i].apply(ri);
         if any_contact {
             ri = contact.apply(i, ri);
             zi = contact.apply(i, zi);
@@ -703,7 +704,7 @@ struct SolveInput<'a> {
     contact: ContactRows<'a>,
     coupling: (&'a [u32], &'a [CouplingGroup]),
     rhs: &'a [Vec3A],
-    inv_diag: &'a [Mat3A],
+    inv_diag: &'a [SymmetricBlock],
     any_contact: bool,
     fragments: usize,
     /// Squared residual norm at which the solve stops.
@@ -720,7 +721,7 @@ struct Shared<'a> {
     coupling_offsets: &'a [u32],
     couplings: SharedSlice<'a, CouplingGroup>,
     rhs: SharedSlice<'a, Vec3A>,
-    inv_diag: SharedSlice<'a, Mat3A>,
+    inv_diag: SharedSlice<'a, SymmetricBlock>,
     contact_slot: SharedSlice<'a, u32>,
     contact_normal: SharedSlice<'a, Vec3A>,
     contact_pushed: SharedSlice<'a, f32>,
@@ -1104,7 +1105,7 @@ pub(crate) fn substep(
     for buffer in [&mut s.rhs, &mut s.dv, &mut s.r, &mut s.z, &mut s.p, &mut s.ap] {
         buffer.resize(n, Vec3A::ZERO);
     }
-    s.inv_diag.resize(n, Mat3A::ZERO);
+    s.inv_diag.resize(n, SymmetricBlock::default());
     s.couplings.layout(&model.springs.offsets);
     // Without wind the assembly adds gravity and the pressure per vertex (two serial passes
     // fewer); with wind the external forces are gathered here first.

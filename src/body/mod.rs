@@ -29,6 +29,7 @@ mod simulator;
 mod spring_terms;
 mod springs;
 mod surface;
+mod symmetric_block;
 mod wind;
 mod xpbd;
 
