@@ -84,6 +84,21 @@ fn tet(o: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
     (a - o).dot((b - o).cross(c - o))
 }
 
+/// Point `i` of `x` as a `Vec3A`: one unaligned 16-byte load where a point follows it (the
+/// fourth lane, the next point's x, is ignored by every Vec3A operation used here), else
+/// assembled from its three floats. (`Vec3A::from(Vec3)` assembles the lanes one by one: with
+/// two points per triangle corner that was a fifth of the gradient pass's instructions.)
+#[inline(always)]
+fn point(x: &[Vec3], i: usize) -> Vec3A {
+    #[cfg(target_arch = "x86_64")]
+    if i + 1 < x.len() {
+        // SAFETY: points i and i + 1 are in the slice (checked above), so the 16 bytes from
+        // the start of point i are too; SSE2 is always present on x86-64.
+        return Vec3A::from(unsafe { std::arch::x86_64::_mm_loadu_ps(x.as_ptr().add(i) as *const f32) });
+    }
+    Vec3A::from(x[i])
+}
+
 fn ring_center(x: &[Vec3], ring: &[u32]) -> DVec3 {
     ring.iter().map(|&v| x[v as usize].as_dvec3()).sum::<DVec3>() / ring.len() as f64
 }
@@ -230,10 +245,10 @@ impl Gas {
         self.finish(x, origin, six_v);
     }
 
-    /// [`Gas::measure_with_gradient`] in parallel chunks of vertices: each vertex gathers the
-    /// gradient terms of its corners (in face order, so the gradient is the same to the bit as
-    /// the scattering form's) and the first corner of each face adds the face's volume term.
-    /// The volume sums differ from the serial form's in rounding only.
+    /// [`Gas::measure_with_gradient`] in parallel chunks: each vertex gathers the gradient terms
+    /// of its corners (in face order, so the gradient is the same to the bit as the scattering
+    /// form's), and the volume is summed over fixed chunks of faces. The volume sums differ
+    /// from the serial form's in rounding only.
     pub fn measure_with_gradient_parallel(
         &mut self,
         pool: &WorkerPool,
@@ -245,23 +260,17 @@ impl Gas {
         let n = out.len();
         let origin = self.prepare_gradient(x, triangles, face_fragment, n);
         let fragments = self.fragment_count().max(1);
-        let chunks = n.div_ceil(VERTEX_CHUNK);
+        let face_chunks = triangles.len().div_ceil(FACE_CHUNK);
         let mut chunk_six_v = std::mem::take(&mut self.chunk_six_v);
         chunk_six_v.clear();
-        chunk_six_v.resize(chunks * fragments, 0.0);
-        struct Task<'a> {
-            first: usize,
-            out: &'a mut [Vec3],
-            six_v: &'a mut [f64],
-        }
-        let mut tasks: Vec<Task> = out
-            .chunks_mut(VERTEX_CHUNK)
-            .zip(chunk_six_v.chunks_mut(fragments))
-            .enumerate()
-            .map(|(c, (out, six_v))| Task { first: c * VERTEX_CHUNK, out, six_v })
-            .collect();
+        chunk_six_v.resize(face_chunks * fragments, 0.0);
         let this = &*self;
-        pool.for_each_task(&mut tasks, |task| this.gradient_rows(x, &origin, task.first, task.out, task.six_v));
+        let mut rows: Vec<(usize, &mut [Vec3])> = out.chunks_mut(VERTEX_CHUNK).enumerate().collect();
+        pool.for_each_task(&mut rows, |(c, out)| this.gradient_rows(x, &origin, *c * VERTEX_CHUNK, out));
+        let mut faces: Vec<(usize, &mut [f64])> = chunk_six_v.chunks_mut(fragments).enumerate().collect();
+        pool.for_each_task(&mut faces, |(c, six_v)| {
+            this.face_chunk_volumes(x, &origin, triangles, face_fragment, *c, six_v)
+        });
         self.finish_gradient(x, &origin, &chunk_six_v, out);
         self.chunk_six_v = chunk_six_v;
     }
@@ -282,58 +291,52 @@ impl Gas {
         self.origins(x)
     }
 
-    /// `∂V/∂x` (without the caps' share) at the vertices `first..first + out.len()` into `out`,
-    /// and their faces' part of 6 V per fragment into `six_v` (which it zeroes first).
-    pub fn gradient_rows(&self, x: &[Vec3], origin: &[DVec3], first: usize, out: &mut [Vec3], six_v: &mut [f64]) {
-        six_v.fill(0.0);
+    /// `∂V/∂x` (without the caps' share) at the vertices `first..first + out.len()` into `out`
+    /// (the volume is summed over faces apart, [`Gas::face_chunk_volumes`]: here, at the first
+    /// corner of each face, its f64 term and the irregular branch to it took about half of the
+    /// pass's instructions).
+    pub fn gradient_rows(&self, x: &[Vec3], origin: &[DVec3], first: usize, out: &mut [Vec3]) {
         for (k, g) in out.iter_mut().enumerate() {
             let v = first + k;
             let mut sum = Vec3::ZERO;
-            let p0 = x[v].as_dvec3();
             let fan = &self.corners[self.corner_offsets[v] as usize..self.corner_offsets[v + 1] as usize];
             if self.closed_fan[v] {
                 // Around a closed ring `Σ (b - o)×(c - o) = Σ b×c` for any origin o, so the
                 // gradient is summed about the vertex itself in f32: short edges, no
                 // cancellation (about o, the f64 terms are ~|x - o|² for a sum the size of
-                // the fan's area). Only each face's volume term (at its corner 0) needs o and
-                // f64. On the issue-5 balloon (one thread, perf) this pass went from 9.2% of an
-                // implicit step in f64 to 6.0%.
-                let xv = Vec3A::from(x[v]);
-                let mut across_sum = Vec3A::ZERO;
-                let mut gas = false;
-                for corner in fan {
-                    let frag = (corner.fragment_first >> 1) as usize;
-                    let (b, c) = (x[corner.next as usize], x[corner.prev as usize]);
-                    across_sum += (Vec3A::from(b) - xv).cross(Vec3A::from(c) - xv);
-                    gas |= self.n_rt[frag] > 0.0;
-                    if corner.fragment_first & 1 != 0 {
-                        let o = origin[frag];
-                        six_v[frag] += (p0 - o).dot((b.as_dvec3() - o).cross(c.as_dvec3() - o));
-                    }
+                // the fan's area). On the issue-5 balloon (one thread, perf) this pass went
+                // from 9.2% of an implicit step in f64 to 6.0%.
+                // The faces of a closed ring are one fragment (they are joined edge to edge).
+                if self.n_rt[(fan[0].fragment_first >> 1) as usize] <= 0.0 {
+                    *g = Vec3::ZERO;
+                    continue;
                 }
-                *g = if gas { Vec3::from(across_sum * (1.0 / 6.0)) } else { Vec3::ZERO };
+                let xv = point(x, v);
+                let mut across_sum = Vec3A::ZERO;
+                for corner in fan {
+                    let (b, c) = (point(x, corner.next as usize), point(x, corner.prev as usize));
+                    across_sum += (b - xv).cross(c - xv);
+                }
+                *g = Vec3::from(across_sum * (1.0 / 6.0));
                 continue;
             }
             for corner in fan {
                 let frag = (corner.fragment_first >> 1) as usize;
-                let o = origin[frag];
-                let (p1, p2) = (x[corner.next as usize].as_dvec3() - o, x[corner.prev as usize].as_dvec3() - o);
-                // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
-                let across = p1.cross(p2);
-                if corner.fragment_first & 1 != 0 {
-                    six_v[frag] += (p0 - o).dot(across);
-                }
                 if self.n_rt[frag] > 0.0 {
-                    sum += (across * SIXTH).as_vec3();
+                    let o = origin[frag];
+                    let (p1, p2) = (x[corner.next as usize].as_dvec3() - o, x[corner.prev as usize].as_dvec3() - o);
+                    // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
+                    sum += (p1.cross(p2) * SIXTH).as_vec3();
                 }
             }
             *g = sum;
         }
     }
 
-    /// The end of the parallel gathering: adds the chunks' parts of 6 V (`chunk_six_v`,
-    /// `max(fragments, 1)` per chunk, in chunk order) and the caps' share of the gradient `out`,
-    /// and sets volumes, hole areas and pressures.
+    /// The end of the parallel gathering: adds the face chunks' parts of 6 V (`chunk_six_v`,
+    /// `max(fragments, 1)` per chunk of [`FACE_CHUNK`] faces, in chunk order: the sums of
+    /// [`Gas::finish_face_chunks`], to the bit) and the caps' share of the gradient `out`, and
+    /// sets volumes, hole areas and pressures.
     pub fn finish_gradient(&mut self, x: &[Vec3], origin: &[DVec3], chunk_six_v: &[f64], out: &mut [Vec3]) {
         let fragments = self.fragment_count();
         let mut six_v = vec![0.0f64; fragments];

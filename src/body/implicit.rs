@@ -25,7 +25,7 @@ use super::coarse::{CoarseSpace, CoarseView};
 use super::coupling_slices::{CouplingGroup, CouplingSlices, SLICE, SliceRowsMut, for_each_row_sum, group_range};
 use super::energy;
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
-use super::gas::Gas;
+use super::gas::{self, Gas};
 use super::obstacles::{Obstacle, resolve, touching};
 use super::spring_terms::{SpringInput, SpringTerms, spring_terms_range};
 use super::symmetric_block::SymmetricBlock;
@@ -772,7 +772,7 @@ struct ChunkSums {
     momentum: Vec<(glam::DVec3, f64, bool)>,
     /// The parts of the coarse `r·z`.
     coarse_dots: Vec<f64>,
-    /// Per chunk and fragment (at least one) the gas's 6 V.
+    /// Per chunk of faces ([`gas::FACE_CHUNK`]) and fragment (at least one) the gas's 6 V.
     gas_six_v: Vec<f64>,
 }
 
@@ -791,8 +791,6 @@ impl ChunkSums {
         self.momentum.clear();
         self.momentum.resize(chunks, (glam::DVec3::ZERO, 0.0, true));
         self.coarse_dots.resize(3, 0.0);
-        self.gas_six_v.clear();
-        self.gas_six_v.resize(chunks * fragments.max(1), 0.0);
     }
 
     fn memory_bytes(&self) -> usize {
@@ -1170,8 +1168,11 @@ pub(crate) fn substep(
     }
     let fragments = s.gas_dot.len();
     let chunks = n.div_ceil(CHUNK);
+    let face_chunks = model.triangles.len().div_ceil(gas::FACE_CHUNK);
     s.gas_partial.resize(chunks * fragments, 0.0);
     s.sums.resize(chunks, fragments);
+    s.sums.gas_six_v.clear();
+    s.sums.gas_six_v.resize(face_chunks * fragments.max(1), 0.0);
     if reuse {
         s.sums.gas_v.copy_from_slice(&s.prepared_gas_v);
     }
@@ -1231,47 +1232,23 @@ pub(crate) fn substep(
     let (end_springs, end_vertices) =
         (SharedSlice::new(&mut s.sums.end_springs), SharedSlice::new(&mut s.sums.end_vertices));
     let gas_lock = std::sync::RwLock::new(gas);
-    // The gas's origins at the end of the substep (made by member 0 for the prepared gradient).
-    let end_origin = std::sync::RwLock::new(Vec::new());
     // Gas gradient, assembly, solve and the update of x and v: one parallel region (see
     // `Shared::solve`).
     let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
-    // The gas gradient, volumes and pressures at the current x (after `prepare_gradient` or
-    // `Gas::origins` for `origin`), and the gas coefficients.
-    let gradient_pass = |team: &Team, origin: &[glam::DVec3]| {
-        let fragments = fragments.max(1);
-        {
-            let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
-            if let Some(gas) = guard.as_deref() {
-                team.claim(chunks, |c| {
-                    // SAFETY: this member's chunks of the gradient and of the sums; x is
-                    // written by nobody.
-                    let (out, six_v, x) = unsafe {
-                        (gradient.part(rows(c)), gas_six_v.part(c * fragments..(c + 1) * fragments), xs.whole())
-                    };
-                    gas.gradient_rows(x, origin, c * CHUNK, out, six_v);
-                });
-            }
-        }
-        team.barrier();
-        if team.index() == 0 {
-            let mut guard = gas_lock.write().unwrap_or_else(|e| e.into_inner());
-            if let Some(gas) = guard.as_deref_mut() {
-                // SAFETY: member 0 alone works in this pass.
-                unsafe {
-                    gas.finish_gradient(xs.whole(), origin, gas_six_v.whole(), gradient.part(0..n));
-                    gas_coefficients(gas, gas_coef.part(0..gas_coef.len()));
-                }
-            }
-        }
-        team.barrier();
-    };
-    // The spring terms (chunks of springs), and `Σ g·v` per chunk of vertices, in one pass, at
-    // the state (x, v) with the gas fragments and gradient `gas_state`; with `energies` also the
-    // chunks' energies of that state (in the chunks and order of `energy::state_energies`: the
-    // same bits), each spring chunk's from its terms while they are still in the cache (a pass
-    // of its own read the whole 1.5 MB of terms of the balloon again for their extensions).
-    let terms_pass = |team: &Team, x: &[Vec3], v: &[Vec3], gas_state: (&[u32], &[Vec3]), energies: bool| {
+    // The state pass, at the state (x, v) the team reads from `xs` and `vs`: the spring terms
+    // (chunks of springs) and `Σ g·v` per chunk of vertices; with `energies` also the chunks'
+    // energies of that state (in the chunks and order of `energy::state_energies`: the same
+    // bits), each spring chunk's from its terms while they are still in the cache (a pass of its
+    // own read all the balloon's terms again for their extensions). With `origin` (the gas's,
+    // from `prepare_gradient` or `Gas::origins`) it first measures the gas there: gradient in
+    // chunks of vertices and volume in chunks of faces (those of `energy::state_energies`: the
+    // same bits) in the same claim as the spring terms, which do not need them, then member 0
+    // finishes the volumes, pressures and gas coefficients, and only `Σ g·v` waits for that.
+    // (The gas and the spring terms were two passes: one barrier more, and each pass ended
+    // with a member waiting for the other's last chunk.)
+    let state_pass = |team: &Team, origin: Option<&[glam::DVec3]>, energies: bool| {
+        // SAFETY: nobody writes x and v in this pass.
+        let (x, v) = unsafe { (xs.whole(), vs.whole()) };
         let spring_input = SpringInput {
             ends: &model.springs.ends,
             rest: &model.springs.rest,
@@ -1282,47 +1259,95 @@ pub(crate) fn substep(
             h,
         };
         let spring_chunks = model.springs.len().div_ceil(SPRING_CHUNK);
-        let gas_chunks = if fragments > 0 { chunks } else { 0 };
         let vertex_chunks = if energies { n.div_ceil(energy::VERTEX_CHUNK) } else { 0 };
+        let (gradient_chunks, volume_chunks) = if origin.is_some() { (chunks, face_chunks) } else { (0, 0) };
+        let gas_chunks = if fragments > 0 { chunks } else { 0 };
+        // `Σ g·v` in the first claim when the gradient is already there.
+        let first_gas_chunks = if origin.is_some() { 0 } else { gas_chunks };
         let (ks, g) = (model.settings.spring_stiffness, model.settings.gravity);
-        team.claim(spring_chunks + gas_chunks + vertex_chunks, |c| {
-            if c < spring_chunks {
-                let range = c * SPRING_CHUNK..((c + 1) * SPRING_CHUNK).min(model.springs.len());
-                let first = range.start;
-                // SAFETY: this chunk of the terms, written by this member alone.
-                let terms = unsafe { shared.terms.part(range.clone()) };
-                spring_terms_range(&spring_input, first, terms);
-                if energies {
-                    let (mut spring, mut strain) = (0.0f64, 0.0f32);
-                    for (t, &rest) in terms.iter().zip(&model.springs.rest[range]) {
-                        // `springs::spring_energy` and `spring_strain` of the same extension.
-                        let stretch = t.extension as f64;
-                        spring += 0.5 * ks as f64 * stretch * stretch;
-                        strain = strain.max(t.extension / rest);
+        let gas_dots = |c: usize| {
+            let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+            let vertex_fragment = guard.as_deref().map_or(&[][..], |g| &g.vertex_fragment);
+            // SAFETY: this chunk's sums, written by this member alone; the gradient is written
+            // by nobody in this pass.
+            let (out, gradient) = unsafe { (shared.gas_v.part(c * fragments..(c + 1) * fragments), gradient.whole()) };
+            gas_dots_range((vertex_fragment, gradient), rows(c), |i| Vec3A::from(v[i]), out);
+        };
+        {
+            let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+            let gas = guard.as_deref();
+            let six_v_parts = fragments.max(1);
+            let tasks = [spring_chunks, gradient_chunks, volume_chunks, vertex_chunks, first_gas_chunks];
+            team.claim(tasks.iter().sum(), |c| {
+                if c < spring_chunks {
+                    let range = c * SPRING_CHUNK..((c + 1) * SPRING_CHUNK).min(model.springs.len());
+                    let first = range.start;
+                    // SAFETY: this chunk of the terms, written by this member alone.
+                    let terms = unsafe { shared.terms.part(range.clone()) };
+                    spring_terms_range(&spring_input, first, terms);
+                    if energies {
+                        let (mut spring, mut strain) = (0.0f64, 0.0f32);
+                        for (t, &rest) in terms.iter().zip(&model.springs.rest[range]) {
+                            // `springs::spring_energy` and `spring_strain` of the same extension.
+                            let stretch = t.extension as f64;
+                            spring += 0.5 * ks as f64 * stretch * stretch;
+                            strain = strain.max(t.extension / rest);
+                        }
+                        // SAFETY: this chunk's slot (the spring chunks are the energy's), written
+                        // by this member alone.
+                        unsafe { end_springs.part(c..c + 1)[0] = (spring, strain) };
                     }
-                    // SAFETY: this chunk's slot (the spring chunks are the energy's), written
-                    // by this member alone.
-                    unsafe { end_springs.part(c..c + 1)[0] = (spring, strain) };
+                    return;
                 }
-            } else if c >= spring_chunks + gas_chunks {
-                let c = c - spring_chunks - gas_chunks;
-                let range = c * energy::VERTEX_CHUNK..((c + 1) * energy::VERTEX_CHUNK).min(n);
-                let kinetic = energy::kinetic(&model.mass[range.clone()], &v[range.clone()]);
-                let gravity = energy::gravity(&model.mass[range.clone()], &x[range], g);
-                // SAFETY: this chunk's slot, written by this member alone.
-                unsafe { end_vertices.part(c..c + 1)[0] = (kinetic, gravity) };
-            } else {
                 let c = c - spring_chunks;
-                // SAFETY: this chunk's sums, written by this member alone.
-                let out = unsafe { shared.gas_v.part(c * fragments..(c + 1) * fragments) };
-                gas_dots_range(gas_state, rows(c), |i| Vec3A::from(v[i]), out);
-            }
-        });
+                if c < gradient_chunks {
+                    if let (Some(gas), Some(origin)) = (gas, origin) {
+                        // SAFETY: this member's chunk of the gradient.
+                        gas.gradient_rows(x, origin, c * CHUNK, unsafe { gradient.part(rows(c)) });
+                    }
+                    return;
+                }
+                let c = c - gradient_chunks;
+                if c < volume_chunks {
+                    if let (Some(gas), Some(origin)) = (gas, origin) {
+                        // SAFETY: this member's face chunk of the sums.
+                        let six_v = unsafe { gas_six_v.part(c * six_v_parts..(c + 1) * six_v_parts) };
+                        gas.face_chunk_volumes(x, origin, model.triangles, model.face_fragment, c, six_v);
+                    }
+                    return;
+                }
+                let c = c - volume_chunks;
+                if c < vertex_chunks {
+                    let range = c * energy::VERTEX_CHUNK..((c + 1) * energy::VERTEX_CHUNK).min(n);
+                    let kinetic = energy::kinetic(&model.mass[range.clone()], &v[range.clone()]);
+                    let gravity = energy::gravity(&model.mass[range.clone()], &x[range], g);
+                    // SAFETY: this chunk's slot, written by this member alone.
+                    unsafe { end_vertices.part(c..c + 1)[0] = (kinetic, gravity) };
+                    return;
+                }
+                gas_dots(c - vertex_chunks);
+            });
+        }
         team.barrier();
+        if let Some(origin) = origin {
+            if team.index() == 0 {
+                let mut guard = gas_lock.write().unwrap_or_else(|e| e.into_inner());
+                if let Some(gas) = guard.as_deref_mut() {
+                    // SAFETY: member 0 alone works in this pass.
+                    unsafe {
+                        gas.finish_gradient(x, origin, gas_six_v.whole(), gradient.part(0..n));
+                        gas_coefficients(gas, gas_coef.part(0..gas_coef.len()));
+                    }
+                }
+            }
+            team.barrier();
+            team.claim(gas_chunks, gas_dots);
+            team.barrier();
+        }
     };
     let iterations = pool.team(|team| {
-        if gradient_in_team && !reuse {
-            gradient_pass(team, &gas_origin);
+        if !reuse {
+            state_pass(team, gradient_in_team.then_some(&gas_origin[..]), false);
         }
         let (iterations, any_contact) = {
             let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
@@ -1342,9 +1367,6 @@ pub(crate) fn substep(
             };
             let previous_dv = unsafe { previous.whole() };
             let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
-            if !reuse {
-                terms_pass(team, sys.x, sys.v, (sys.vertex_fragment, sys.gradient), false);
-            }
             let mut gas_dot_v = vec![0.0f64; fragments];
             // SAFETY: nobody writes the sums or the terms in this pass.
             let (gas_v, terms) = unsafe { (shared.gas_v.whole(), shared.terms.whole()) };
@@ -1496,24 +1518,14 @@ pub(crate) fn substep(
         });
         if prepare {
             team.barrier();
-            // SAFETY: from here on nobody writes x or v.
-            let (x, v) = unsafe { (xs.whole(), vs.whole()) };
             if gradient_in_team {
-                if team.index() == 0 {
-                    let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
-                    let origin = guard.as_deref().map(|gas| gas.origins(x)).unwrap_or_default();
-                    *end_origin.write().unwrap_or_else(|e| e.into_inner()) = origin;
-                }
-                team.barrier();
-                let origin = end_origin.read().unwrap_or_else(|e| e.into_inner()).clone();
-                gradient_pass(team, &origin);
-            }
-            {
-                let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
-                let vertex_fragment = guard.as_deref().map_or(&[][..], |g| &g.vertex_fragment);
-                // SAFETY: the gradient was finished before the barrier ending `gradient_pass`;
-                // nobody writes it from here on.
-                terms_pass(team, x, v, (vertex_fragment, unsafe { gradient.whole() }), true);
+                // SAFETY: from here on nobody writes x (each member takes the origins itself:
+                // a few points, where handing them over took a barrier).
+                let x = unsafe { xs.whole() };
+                let origin = gas_lock.read().unwrap_or_else(|e| e.into_inner()).as_deref().map(|gas| gas.origins(x));
+                state_pass(team, Some(origin.as_deref().unwrap_or_default()), true);
+            } else {
+                state_pass(team, None, true);
             }
         }
         iterations
