@@ -19,7 +19,7 @@
 //! sliding contact the block is inverted on the tangent plane (`start_vertex`). On the issue-5
 //! balloon resting on the ground this took the solve from 70 to 7 CG iterations per step.
 
-use glam::{Mat3A, Vec3, Vec3A};
+use glam::{Vec3, Vec3A};
 
 use super::coarse::{CoarseSpace, CoarseView};
 use super::coupling_slices::{CouplingGroup, CouplingSlices, SLICE, SliceRowsMut, for_each_row_sum, group_range};
@@ -28,7 +28,7 @@ use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::{self, Gas};
 use super::obstacles::{Obstacle, resolve, touching};
 use super::spring_terms::{SpringInput, SpringTerms, spring_terms_range};
-use super::symmetric_block::SymmetricBlock;
+use super::symmetric_block::{SymmetricBlock, SymmetricParts};
 use crate::parallel::{SharedSlice, Team, WorkerPool};
 
 /// How a vertex in contact with an obstacle is constrained inside the solve (Baraff and Witkin
@@ -229,24 +229,6 @@ const _: () = assert!(CHUNK % SLICE == 0);
 /// end-of-substep spring energy as `energy::state_energies` does (the terms need no sums).
 const SPRING_CHUNK: usize = energy::SPRING_CHUNK;
 
-/// `a bᵀ`.
-fn outer(a: Vec3A, b: Vec3A) -> Mat3A {
-    Mat3A::from_cols(a * b.x, a * b.y, a * b.z)
-}
-
-/// Inverse of a symmetric positive definite block; its diagonal inverse when the block is
-/// (numerically) singular, or zero for an empty row.
-fn invert_block(m: Mat3A) -> Mat3A {
-    let det = m.determinant();
-    let scale = m.x_axis.x.abs() + m.y_axis.y.abs() + m.z_axis.z.abs();
-    if det.is_finite() && det > 1e-12 * scale * scale * scale {
-        m.inverse()
-    } else {
-        let d = Vec3::new(m.x_axis.x, m.y_axis.y, m.z_axis.z);
-        Mat3A::from_diagonal(Vec3::ONE / d.max(Vec3::splat(f32::MIN_POSITIVE)))
-    }
-}
-
 /// The per-substep values every pass reads.
 struct System<'a> {
     model: &'a Model<'a>,
@@ -312,7 +294,7 @@ fn assemble_chunk(
         let (rhs, mut inv_diag, magnitude) = assemble_vertex(sys, terms, i, f, gas_dot_v, &mut t.couplings);
         let (dv, filter) = start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, previous_dv[i], &mut inv_diag);
         t.rhs[k] = rhs;
-        t.inv_diag[k] = SymmetricBlock::from_mat(inv_diag);
+        t.inv_diag[k] = inv_diag;
         t.dv[k] = dv;
         if let Some(frag) = sys.fragment(i) {
             run.add(t.gas, frag, Vec3A::from(sys.gradient[i]).dot(dv) as f64);
@@ -352,7 +334,7 @@ fn start_vertex(
     v: Vec3,
     rhs: Vec3A,
     guess: Vec3A,
-    inv_diag: &mut Mat3A,
+    inv_diag: &mut SymmetricBlock,
 ) -> (Vec3A, ContactFilter) {
     if model.inv_mass[i] == 0.0 {
         return (Vec3A::ZERO, ContactFilter::Free);
@@ -375,10 +357,12 @@ fn start_vertex(
     // inverse instead overstates the tangential response where springs couple the normal to the
     // tangent (the rim of a contact patch) and stalls the iterations.
     let n = Vec3A::from(normal);
-    let dn = *inv_diag * n;
+    let dn = inv_diag.apply(n);
     let ndn = n.dot(dn);
     if ndn > 0.0 {
-        *inv_diag -= outer(dn, dn / ndn);
+        let mut restricted = inv_diag.parts();
+        restricted.add_outer(dn, -1.0 / ndn);
+        *inv_diag = restricted.stored();
     }
     (dv.into(), ContactFilter::Slide(normal, pushed.max(0.0)))
 }
@@ -392,12 +376,12 @@ fn assemble_vertex(
     force: Vec3,
     gas_dot_v: &[f64],
     couplings: &mut SliceRowsMut,
-) -> (Vec3A, Mat3A, f32) {
+) -> (Vec3A, SymmetricBlock, f32) {
     let model = sys.model;
     let h = sys.h;
     let mut rhs = Vec3A::from(force) * h;
     // The diagonal block is `(m + Σ alpha) I + Σ w wᵀ`: the scalar part summed apart.
-    let mut diag = Mat3A::ZERO;
+    let mut diag = SymmetricParts::default();
     let mut diag_scalar = model.mass[i];
     let mut magnitude = model.mass[i] * model.settings.gravity.length();
     let around = model.springs.around(i);
@@ -411,17 +395,16 @@ fn assemble_vertex(
         // The block as the coupling slices store it (bfloat16), for the diagonal too: the
         // matrix is then exactly that of the rounded springs (see `coupling_slices`).
         let coupling = t.coupling.unpacked();
-        let w = coupling.w();
-        diag += outer(w, w);
+        diag.add_outer(coupling.w(), 1.0);
         diag_scalar += coupling.alpha();
         magnitude += (model.settings.spring_stiffness * t.extension).abs();
     }
     row.finish(around.len());
-    diag += Mat3A::from_diagonal(Vec3::splat(diag_scalar));
+    diag.diagonal += Vec3A::splat(diag_scalar);
     if let Some(frag) = sys.fragment(i) {
         let g = Vec3A::from(sys.gradient[i]);
         let coef = sys.gas_coef[frag];
-        diag += outer(g * coef as f32, g);
+        diag.add_outer(g, coef as f32);
         magnitude += g.length() * sys.gas_pressure[frag].max(0.0) as f32;
         // -h² (P/V) g (g·v)
         rhs -= g * (coef * gas_dot_v[frag]) as f32;
@@ -429,7 +412,7 @@ fn assemble_vertex(
     if model.inv_mass[i] == 0.0 {
         rhs = Vec3A::ZERO;
     }
-    (rhs, invert_block(diag), magnitude)
+    (rhs, diag.inverse(), magnitude)
 }
 
 /// A chunk of rows of a product with the system matrix.

@@ -1,32 +1,77 @@
 //! A symmetric 3x3 block in its six distinct entries (24 bytes instead of a `Mat3A`'s 48): the
 //! block-Jacobi preconditioner of the implicit integrator, which every conjugate-gradient
-//! iteration reads for every vertex.
+//! iteration reads for every vertex, and the diagonal block it is the inverse of.
 //!
 //! On the issue-5 balloon (10,242 vertices) the inverted blocks took 492 KB as `Mat3A`, about a
 //! quarter of what an iteration streams; on two threads each core's share of an iteration was
 //! then just over its 1 MB L2 cache. Stored so, the preconditioner is also exactly symmetric
-//! (the inverse of a symmetric block, computed by cofactors in f32, is so only up to rounding),
-//! as conjugate gradients assume.
+//! (a general 3x3 inverse in f32 is so only up to rounding), as conjugate gradients assume.
+//!
+//! In registers a block is two `Vec3A`: its diagonal `(xx, yy, zz)` and its off-diagonal
+//! `(xy, yz, zx)` (each lane's row and the next axis), so that `w wᵀ` adds `w * w` and
+//! `w * w.yzx` (two products where a `Mat3A` took three columns of three) and the inverse's
+//! cofactors are lane-wise products of shuffles.
 
-use glam::{Mat3A, Vec3A};
+use glam::{Vec3A, Vec3Swizzles};
 
-/// `[xx, yy, zz, xy, xz, yz]`.
+/// `[xx, yy, zz, xy, yz, zx]`.
 #[derive(Clone, Copy, Default, Debug, PartialEq)]
 #[repr(C)]
 pub(crate) struct SymmetricBlock([f32; 6]);
 
+/// A symmetric block being built: diagonal `(xx, yy, zz)` and off-diagonal `(xy, yz, zx)`.
+#[derive(Clone, Copy, Default, Debug, PartialEq)]
+pub(crate) struct SymmetricParts {
+    pub diagonal: Vec3A,
+    pub off: Vec3A,
+}
+
+impl SymmetricParts {
+    /// `s I`.
+    #[cfg(test)]
+    pub fn scalar(s: f32) -> Self {
+        SymmetricParts { diagonal: Vec3A::splat(s), off: Vec3A::ZERO }
+    }
+
+    /// Adds `s a aᵀ`.
+    #[inline(always)]
+    pub fn add_outer(&mut self, a: Vec3A, s: f32) {
+        let sa = a * s;
+        self.diagonal += sa * a;
+        self.off += sa * a.yzx();
+    }
+
+    /// The inverse (of a symmetric positive definite block: by cofactors); the inverse of its
+    /// diagonal when it is (numerically) singular (a zero entry there gives 1 / f32::MIN_POSITIVE,
+    /// finite).
+    pub fn inverse(self) -> SymmetricBlock {
+        let (d, o) = (self.diagonal, self.off);
+        // Cofactors: (yy zz - yz², xx zz - zx², xx yy - xy²) and
+        // (zx yz - xy zz, xy zx - yz xx, xy yz - zx yy).
+        let cofactor_diagonal = d.yxx() * d.zzy() - o.yzx() * o.yzx();
+        let cofactor_off = o.zxx() * o.yzy() - o * d.zxy();
+        let det = d.x * cofactor_diagonal.x + o.x * cofactor_off.x + o.z * cofactor_off.z;
+        let scale = d.x.abs() + d.y.abs() + d.z.abs();
+        if det.is_finite() && det > 1e-12 * scale * scale * scale {
+            let inv = 1.0 / det;
+            SymmetricParts { diagonal: cofactor_diagonal * inv, off: cofactor_off * inv }.stored()
+        } else {
+            let diagonal = Vec3A::ONE / d.max(Vec3A::splat(f32::MIN_POSITIVE));
+            SymmetricParts { diagonal, off: Vec3A::ZERO }.stored()
+        }
+    }
+
+    /// The six entries as stored.
+    pub fn stored(self) -> SymmetricBlock {
+        let (d, o) = (self.diagonal, self.off);
+        SymmetricBlock([d.x, d.y, d.z, o.x, o.y, o.z])
+    }
+}
+
 impl SymmetricBlock {
-    /// The symmetric part of `m` (`(m + mᵀ) / 2`).
-    pub fn from_mat(m: Mat3A) -> Self {
-        let pair = |a: f32, b: f32| 0.5 * (a + b);
-        SymmetricBlock([
-            m.x_axis.x,
-            m.y_axis.y,
-            m.z_axis.z,
-            pair(m.y_axis.x, m.x_axis.y),
-            pair(m.z_axis.x, m.x_axis.z),
-            pair(m.z_axis.y, m.y_axis.z),
-        ])
+    pub fn parts(self) -> SymmetricParts {
+        let [xx, yy, zz, xy, yz, zx] = self.0;
+        SymmetricParts { diagonal: Vec3A::new(xx, yy, zz), off: Vec3A::new(xy, yz, zx) }
     }
 
     /// The block times `r`.
@@ -34,9 +79,9 @@ impl SymmetricBlock {
     pub fn apply(&self, r: Vec3A) -> Vec3A {
         #[cfg(target_arch = "x86_64")]
         {
-            // `diag r + (xy, xy, xz) (r.y, r.x, r.x) + (xz, yz, yz) (r.z, r.z, r.y)` with SSE2
+            // `diag r + (xy, xy, zx) (r.y, r.x, r.x) + (zx, yz, yz) (r.z, r.z, r.y)` with SSE2
             // (part of x86-64): two unaligned loads inside the 24 bytes, `[xx yy zz xy]` and
-            // `[zz xy xz yz]`, instead of nine scalar products (3.5% more instructions in a step).
+            // `[zz xy yz zx]`, instead of nine scalar products (3.5% more instructions in a step).
             use std::arch::x86_64::*;
             // SAFETY: SSE2 is always present on x86-64; both loads read 16 of the 24 bytes.
             unsafe {
@@ -45,9 +90,9 @@ impl SymmetricBlock {
                 let r = __m128::from(r);
                 let diagonal = _mm_mul_ps(head, r);
                 let first =
-                    _mm_mul_ps(_mm_shuffle_ps::<0b00_10_01_01>(tail, tail), _mm_shuffle_ps::<0b00_00_00_01>(r, r));
+                    _mm_mul_ps(_mm_shuffle_ps::<0b00_11_01_01>(tail, tail), _mm_shuffle_ps::<0b00_00_00_01>(r, r));
                 let second =
-                    _mm_mul_ps(_mm_shuffle_ps::<0b00_11_11_10>(tail, tail), _mm_shuffle_ps::<0b00_01_10_10>(r, r));
+                    _mm_mul_ps(_mm_shuffle_ps::<0b00_10_10_11>(tail, tail), _mm_shuffle_ps::<0b00_01_10_10>(r, r));
                 let sum = _mm_add_ps(_mm_add_ps(diagonal, first), second);
                 // The fourth lane (xy r.w + ...) is ignored by every Vec3A operation; cleared
                 // anyway so that no NaN or infinity hides there.
@@ -57,8 +102,8 @@ impl SymmetricBlock {
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
-            let [xx, yy, zz, xy, xz, yz] = self.0;
-            Vec3A::new(xx * r.x + xy * r.y + xz * r.z, xy * r.x + yy * r.y + yz * r.z, xz * r.x + yz * r.y + zz * r.z)
+            let [xx, yy, zz, xy, yz, zx] = self.0;
+            Vec3A::new(xx * r.x + xy * r.y + zx * r.z, xy * r.x + yy * r.y + yz * r.z, zx * r.x + yz * r.y + zz * r.z)
         }
     }
 }
@@ -66,29 +111,49 @@ impl SymmetricBlock {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Mat3A;
 
-    /// The six entries hold a symmetric matrix exactly; an unsymmetric one becomes its
-    /// symmetric part.
+    fn matrix(parts: SymmetricParts) -> Mat3A {
+        let (d, o) = (parts.diagonal, parts.off);
+        Mat3A::from_cols_array(&[d.x, o.x, o.z, o.x, d.y, o.y, o.z, o.y, d.z])
+    }
+
+    /// Sums of outer products (random, so positive definite with the scalar part): the parts
+    /// hold the matrix, the stored block applies it, and its inverse applies the inverse.
     #[test]
-    fn applies_the_symmetric_part() {
+    fn builds_applies_and_inverts_symmetric_blocks() {
         let mut unit = crate::body::test_randoms(0x5eed_0f_b10c);
-        for _ in 0..200 {
-            let a = Mat3A::from_cols_array(&std::array::from_fn(|_| unit()));
-            let symmetric = a + a.transpose();
+        for _ in 0..300 {
+            let mut parts = SymmetricParts::scalar(0.1 + unit().abs());
+            let mut want = Mat3A::from_diagonal(glam::Vec3::splat(parts.diagonal.x));
+            for _ in 0..6 {
+                let (a, s) = (Vec3A::new(unit(), unit(), unit()) * 3.0, unit().abs() * 10.0);
+                parts.add_outer(a, s);
+                want += Mat3A::from_cols(a * (s * a.x), a * (s * a.y), a * (s * a.z));
+            }
+            let got = matrix(parts);
+            for (g, w) in got.to_cols_array().iter().zip(want.to_cols_array()) {
+                assert!((g - w).abs() <= 1e-5 * (1.0 + w.abs()), "{got} vs {want}");
+            }
             let r = Vec3A::new(unit(), unit(), unit());
-            let block = SymmetricBlock::from_mat(symmetric);
-            let (got, want) = (block.apply(r), symmetric * r);
-            assert!((got - want).length() <= 1e-6 * (1.0 + want.length()), "{got} vs {want}");
-            let [xx, yy, zz, xy, xz, yz] = block.0;
-            let scalar = Vec3A::new(
-                xx * r.x + xy * r.y + xz * r.z,
-                xy * r.x + yy * r.y + yz * r.z,
-                xz * r.x + yz * r.y + zz * r.z,
-            );
-            assert!((got - scalar).length() <= 1e-6 * (1.0 + want.length()), "{got} vs {scalar}");
-            let half = SymmetricBlock::from_mat(a).apply(r);
-            let want = (a + a.transpose()) * r * 0.5;
-            assert!((half - want).length() <= 1e-6 * (1.0 + want.length()), "{half} vs {want}");
+            let applied = parts.stored().apply(r);
+            assert!((applied - want * r).length() <= 1e-5 * (1.0 + (want * r).length()));
+            assert_eq!(parts.stored().parts(), parts);
+            // A (A⁻¹ r) = r.
+            let back = want * parts.inverse().apply(r);
+            assert!((back - r).length() <= 1e-3 * r.length(), "{back} vs {r}");
         }
+    }
+
+    /// A singular block falls back to its diagonal's inverse, finite where that is zero.
+    #[test]
+    fn singular_blocks_invert_their_diagonal() {
+        let mut parts = SymmetricParts::scalar(0.0);
+        parts.add_outer(Vec3A::new(1.0, 2.0, 0.0), 1.0);
+        let inverse = parts.inverse().parts();
+        assert_eq!(inverse.off, Vec3A::ZERO);
+        assert_eq!(inverse.diagonal.x, 1.0);
+        assert_eq!(inverse.diagonal.y, 0.25);
+        assert!(inverse.diagonal.z.is_finite() && inverse.diagonal.z > 0.0);
     }
 }
