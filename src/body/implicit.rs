@@ -91,6 +91,9 @@ pub(crate) struct ImplicitScratch {
     /// Per spring, its share of the assembly.
     spring_terms: Vec<SpringTerms>,
     rhs: Vec<Vec3A>,
+    /// Δv: between substeps the last one's (the warm start, reset when the vertex count
+    /// changes), which the assembly turns into the start of the solve in place (a buffer of
+    /// its own was another 164 KB read and written per substep on the balloon).
     dv: Vec<Vec3A>,
     r: Vec<Vec3A>,
     z: Vec<Vec3A>,
@@ -105,8 +108,6 @@ pub(crate) struct ImplicitScratch {
     gas_dot: Vec<f64>,
     /// Per chunk of vertices and per fragment, that chunk's part of `Σ g·p`.
     gas_partial: Vec<f64>,
-    /// Δv of the previous substep (the warm start), reset when the vertex count changes.
-    previous_dv: Vec<Vec3A>,
     /// The contact constraints of the substep (allocated only with obstacles, rewritten by
     /// every assembly): per vertex its slot (u32::MAX: free), and per slot the contact's normal
     /// and the normal speed it takes away (the friction bound); each chunk's contacts fill the
@@ -169,14 +170,14 @@ impl ImplicitScratch {
     /// appended by a split starts from the Δv of the input vertex it was copied from (`origin`);
     /// without this every crack would restart the solve from the free-fall guess.
     pub fn extend_warm_start(&mut self, origin: &[u32]) {
-        let old = self.previous_dv.len();
+        let old = self.dv.len();
         if old == 0 || origin.len() < old {
             return;
         }
         for k in old..origin.len() {
             let from = origin[k] as usize;
-            let guess = if from < old { self.previous_dv[from] } else { Vec3A::ZERO };
-            self.previous_dv.push(guess);
+            let guess = if from < old { self.dv[from] } else { Vec3A::ZERO };
+            self.dv.push(guess);
         }
         if let Some(coarse) = self.coarse.as_mut() {
             coarse.extend(origin);
@@ -190,8 +191,7 @@ impl ImplicitScratch {
                 + self.r.capacity()
                 + self.z.capacity()
                 + self.p.capacity()
-                + self.ap.capacity()
-                + self.previous_dv.capacity())
+                + self.ap.capacity())
                 * 16
             + self.contact_pushed.capacity() * 4
             + self.contact_slot.capacity() * 4
@@ -254,8 +254,8 @@ struct AssemblyTask<'a> {
     couplings: SliceRowsMut<'a>,
     rhs: &'a mut [Vec3A],
     inv_diag: &'a mut [SymmetricBlock],
-    /// The start of the solve: Δv (the warm start) and the contact filters (empty without
-    /// obstacles).
+    /// The start of the solve: Δv (holding the warm start, which the assembly replaces) and
+    /// the contact filters (empty without obstacles).
     dv: &'a mut [Vec3A],
     contact_slot: &'a mut [u32],
     contact_normal: &'a mut [Vec3A],
@@ -270,7 +270,6 @@ fn assemble_chunk(
     sys: &System,
     terms: &[SpringTerms],
     force: &[Vec3],
-    previous_dv: &[Vec3A],
     gas_dot_v: &[f64],
     obstacles: &[Obstacle],
     t: AssemblyTask,
@@ -292,7 +291,7 @@ fn assemble_chunk(
             f
         });
         let (rhs, mut inv_diag, magnitude) = assemble_vertex(sys, terms, i, f, gas_dot_v, &mut t.couplings);
-        let (dv, filter) = start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, previous_dv[i], &mut inv_diag);
+        let (dv, filter) = start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, t.dv[k], &mut inv_diag);
         t.rhs[k] = rhs;
         t.inv_diag[k] = inv_diag;
         t.dv[k] = dv;
@@ -1083,7 +1082,7 @@ pub(crate) fn substep(
     let n = x.len();
     // Set again by the last pass (a substep that does not reach it leaves the step to check).
     s.all_finite = false;
-    for buffer in [&mut s.rhs, &mut s.dv, &mut s.r, &mut s.z, &mut s.p, &mut s.ap] {
+    for buffer in [&mut s.rhs, &mut s.r, &mut s.z, &mut s.p, &mut s.ap] {
         buffer.resize(n, Vec3A::ZERO);
     }
     s.inv_diag.resize(n, SymmetricBlock::default());
@@ -1139,10 +1138,10 @@ pub(crate) fn substep(
     // to step), or on the first substep the free-fall guess Δv = h g: either solves the rigid
     // translation, the mode that a Jacobi preconditioner dominated by stiff springs resolves
     // worst.
-    if s.previous_dv.len() != n {
+    if s.dv.len() != n {
         let g = Vec3A::from(model.settings.gravity * h);
-        s.previous_dv.clear();
-        s.previous_dv.resize(n, g);
+        s.dv.clear();
+        s.dv.resize(n, g);
     }
     if !obstacles.is_empty() {
         s.contact_slot.resize(n, u32::MAX);
@@ -1208,7 +1207,7 @@ pub(crate) fn substep(
     };
     let force = &s.force;
     let (gradient, gas_coef) = (SharedSlice::new(&mut s.gradient), SharedSlice::new(&mut s.gas_coef));
-    let (xs, vs, previous) = (SharedSlice::new(x), SharedSlice::new(v), SharedSlice::new(&mut s.previous_dv));
+    let (xs, vs) = (SharedSlice::new(x), SharedSlice::new(v));
     let momentum = SharedSlice::new(&mut s.sums.momentum);
     let chunk_finite = SharedSlice::new(&mut s.sums.finite);
     let gas_six_v = SharedSlice::new(&mut s.sums.gas_six_v);
@@ -1348,7 +1347,6 @@ pub(crate) fn substep(
                 gas_coef: unsafe { gas_coef.whole() },
                 gas_pressure: gas.map_or(&[][..], |g| &g.pressure),
             };
-            let previous_dv = unsafe { previous.whole() };
             let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
             let mut gas_dot_v = vec![0.0f64; fragments];
             // SAFETY: nobody writes the sums or the terms in this pass.
@@ -1381,8 +1379,7 @@ pub(crate) fn substep(
                         gas: shared.gas.part(gas_rows(c)),
                     }
                 };
-                let (magnitude, rhs, contact) =
-                    assemble_chunk(&sys, terms, force, previous_dv, &gas_dot_v, obstacles, task);
+                let (magnitude, rhs, contact) = assemble_chunk(&sys, terms, force, &gas_dot_v, obstacles, task);
                 // SAFETY: this chunk's sums, written by this member alone.
                 unsafe {
                     shared.chunk_magnitude.part(c..c + 1)[0] = magnitude;
@@ -1424,14 +1421,14 @@ pub(crate) fn substep(
                 (shared.solve(team, &input), any_contact)
             }
         };
-        // SAFETY: from here on each member reads and writes only the rows of its own chunks (Δv
-        // is no longer written by anyone, the contacts by nobody).
-        let (contact, pushed, dv) = unsafe {
+        // SAFETY: from here on each member reads and writes only the rows of its own chunks (the
+        // contacts are written by nobody; Δv only by the last pass, in its own rows).
+        let (contact, pushed) = unsafe {
             if any_contact {
                 let contact = ContactRows { slot: shared.contact_slot.whole(), normal: shared.contact_normal.whole() };
-                (contact, shared.contact_pushed.whole(), shared.dv.whole())
+                (contact, shared.contact_pushed.whole())
             } else {
-                (ContactRows::default(), &[][..], shared.dv.whole())
+                (ContactRows::default(), &[][..])
             }
         };
         // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling
@@ -1440,8 +1437,9 @@ pub(crate) fn substep(
         // forces.
         let mut correction = Vec3A::ZERO;
         if !any_contact {
-            // SAFETY: rhs is written by nobody; the chunk's sums by this member alone.
-            let rhs = unsafe { shared.rhs.whole() };
+            // SAFETY: rhs and Δv are written by nobody in this pass; the chunk's sums by this
+            // member alone.
+            let (rhs, dv) = unsafe { (shared.rhs.whole(), shared.dv.whole()) };
             team.claim(chunks, |c| {
                 let (mut error, mut mass, mut free) = (glam::DVec3::ZERO, 0.0f64, true);
                 for i in rows(c) {
@@ -1467,14 +1465,15 @@ pub(crate) fn substep(
             let rows = rows(c);
             let first = rows.start;
             // SAFETY: this member's chunks.
-            let (x, v, previous, finite) = unsafe {
-                (xs.part(rows.clone()), vs.part(rows.clone()), previous.part(rows), chunk_finite.part(c..c + 1))
+            let (x, v, dv, finite) = unsafe {
+                (xs.part(rows.clone()), vs.part(rows.clone()), shared.dv.part(rows), chunk_finite.part(c..c + 1))
             };
             let mut all_finite = true;
             for k in 0..x.len() {
                 let i = first + k;
-                let dvi = dv[i] + correction;
-                previous[k] = dvi;
+                // Kept as the next substep's warm start.
+                let dvi = dv[k] + correction;
+                dv[k] = dvi;
                 if model.inv_mass[i] == 0.0 {
                     all_finite &= x[k].is_finite() && v[k].is_finite();
                     continue;

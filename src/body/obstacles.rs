@@ -53,6 +53,7 @@ pub(crate) fn project(x: &mut Vec3, obstacles: &[Obstacle]) -> Option<Vec3> {
 }
 
 /// Normal of the obstacle that `x` touches (within `margin` of its surface or inside it), if any.
+#[inline]
 pub(crate) fn touching(x: Vec3, obstacles: &[Obstacle], margin: f32) -> Option<Vec3> {
     obstacles.iter().map(|o| o.distance(x)).filter(|&(d, _)| d <= margin).map(|(_, n)| n).last()
 }
@@ -60,6 +61,7 @@ pub(crate) fn touching(x: Vec3, obstacles: &[Obstacle], margin: f32) -> Option<V
 /// SPEC 2.3 contact response of one vertex: projection to the surface, restitution of the
 /// normal velocity, Coulomb friction on the tangential one (the friction impulse is at most
 /// `friction` times the normal impulse). Returns true when the vertex touched an obstacle.
+#[inline]
 pub(crate) fn resolve(x: &mut Vec3, v: &mut Vec3, obstacles: &[Obstacle], restitution: f32, friction: f32) -> bool {
     let mut touched = false;
     for obstacle in obstacles {
