@@ -200,8 +200,15 @@ fn nothing_is_allocated_for_gas_or_fracture_a_scene_does_not_use() {
 fn results_do_not_depend_on_the_thread_count() {
     // 2562 vertices: more than one parallel chunk, so the threads really share the work.
     let (p, t) = icosphere(4, 0.5);
-    let run = |threads: u32, integrator: u32, ground: bool| {
+    // Scenes: free, on the ground, in wind (the implicit solver then measures the gas and the
+    // external forces before its team region, and sums g·v in the spring-terms claim).
+    let run = |threads: u32, integrator: u32, scene: u32| {
+        let ground = scene == 1;
         let mut def = softshell_body_def_default();
+        if scene == 2 {
+            def.drag = 0.5;
+            def.wind = [3.0, 0.0, 1.0];
+        }
         def.threads = threads;
         def.integrator = integrator;
         def.gas_amount = 30.0;
@@ -218,13 +225,16 @@ fn results_do_not_depend_on_the_thread_count() {
         (s.positions, s.triangles)
     };
     for integrator in [SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, SOFTSHELL_INTEGRATOR_XPBD] {
-        for ground in [false, true] {
-            let one = run(1, integrator, ground);
-            assert_eq!(one, run(2, integrator, ground));
-            assert_eq!(one, run(0, integrator, ground));
+        // (XPBD in this wind, with these cracks, diverges at step 18 and is rolled back: not a
+        // thread-count question, and not this test's.)
+        let scenes: &[u32] = if integrator == SOFTSHELL_INTEGRATOR_XPBD { &[0, 1] } else { &[0, 1, 2] };
+        for &scene in scenes {
+            let one = run(1, integrator, scene);
+            assert_eq!(one, run(2, integrator, scene));
+            assert_eq!(one, run(0, integrator, scene));
             // More threads than the machine may have cores: the implicit solver's team barriers
             // must yield to members that wait for a core, and the bits stay the same.
-            assert_eq!(one, run(3, integrator, ground));
+            assert_eq!(one, run(3, integrator, scene));
         }
     }
 }

@@ -46,12 +46,12 @@ pub(crate) struct Gas {
     /// the previous corner), so its gradient does not depend on the origin (see
     /// [`Gas::measure_with_gradient_parallel`]).
     closed_fan: Vec<bool>,
-    /// Per chunk of vertices and per fragment, that chunk's part of 6 V.
+    /// Per chunk of faces ([`FACE_CHUNK`]) and per fragment, that chunk's part of 6 V.
     chunk_six_v: Vec<f64>,
 }
 
 /// A triangle corner seen from its vertex: the next two corners of the triangle (in its winding)
-/// and the triangle's fragment, with a flag on corner 0 (which adds the face's volume term).
+/// and the triangle's fragment.
 /// Stored per corner so the gathering pass reads 12 bytes instead of looking up the triangle,
 /// its fragment and the corner's place in it (on the issue-5 balloon that lookup, a division and
 /// two remainders per corner, made this pass 12% of an implicit step).
@@ -59,8 +59,7 @@ pub(crate) struct Gas {
 struct Corner {
     next: u32,
     prev: u32,
-    /// `fragment << 1 | (corner == 0)`.
-    fragment_first: u32,
+    fragment: u32,
 }
 
 /// Vertices per chunk of the parallel measurement (fixed, so the sums do not depend on the
@@ -437,8 +436,9 @@ impl Gas {
                 // cancellation (about o, the f64 terms are ~|x - o|² for a sum the size of
                 // the fan's area). On the issue-5 balloon (one thread, perf) this pass went
                 // from 9.2% of an implicit step in f64 to 6.0%.
-                // The faces of a closed ring are one fragment (they are joined edge to edge).
-                if self.n_rt[(fan[0].fragment_first >> 1) as usize] <= 0.0 {
+                // The faces around a vertex are one fragment (fragments are the components joined
+                // through vertices).
+                if self.n_rt[(fan[0].fragment) as usize] <= 0.0 {
                     *g = Vec3::ZERO;
                     continue;
                 }
@@ -452,7 +452,7 @@ impl Gas {
                 continue;
             }
             for corner in fan {
-                let frag = (corner.fragment_first >> 1) as usize;
+                let frag = corner.fragment as usize;
                 if self.n_rt[frag] > 0.0 {
                     let o = origin[frag];
                     let (p1, p2) = (x[corner.next as usize].as_dvec3() - o, x[corner.prev as usize].as_dvec3() - o);
@@ -489,11 +489,7 @@ impl Gas {
             .map(|&corner| {
                 let (face, c) = ((corner / 3) as usize, (corner % 3) as usize);
                 let t = triangles[face];
-                Corner {
-                    next: t[(c + 1) % 3],
-                    prev: t[(c + 2) % 3],
-                    fragment_first: face_fragment[face] << 1 | (c == 0) as u32,
-                }
+                Corner { next: t[(c + 1) % 3], prev: t[(c + 2) % 3], fragment: face_fragment[face] }
             })
             .collect();
         self.closed_fan = (0..n)

@@ -1247,9 +1247,10 @@ pub(crate) fn substep(
         // `Σ g·v` in the first claim when the gradient is already there.
         let first_gas_chunks = if origin.is_some() { 0 } else { gas_chunks };
         let (ks, g) = (model.settings.spring_stiffness, model.settings.gravity);
-        let gas_dots = |c: usize| {
-            let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
-            let vertex_fragment = guard.as_deref().map_or(&[][..], |g| &g.vertex_fragment);
+        // (The caller holds a read guard of the gas: a second read lock by the same thread may
+        // panic, says std.)
+        let gas_dots = |gas: Option<&Gas>, c: usize| {
+            let vertex_fragment = gas.map_or(&[][..], |g| &g.vertex_fragment);
             // SAFETY: this chunk's sums, written by this member alone; the gradient is written
             // by nobody in this pass.
             let (out, gradient) = unsafe { (shared.gas_v.part(c * fragments..(c + 1) * fragments), gradient.whole()) };
@@ -1307,7 +1308,7 @@ pub(crate) fn substep(
                     unsafe { end_vertices.part(c..c + 1)[0] = (kinetic, gravity) };
                     return;
                 }
-                gas_dots(c - vertex_chunks);
+                gas_dots(gas, c - vertex_chunks);
             });
         }
         team.barrier();
@@ -1323,7 +1324,9 @@ pub(crate) fn substep(
                 }
             }
             team.barrier();
-            team.claim(gas_chunks, gas_dots);
+            let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+            team.claim(gas_chunks, |c| gas_dots(guard.as_deref(), c));
+            drop(guard);
             team.barrier();
         }
     };
@@ -1334,9 +1337,9 @@ pub(crate) fn substep(
         let (iterations, any_contact) = {
             let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
             let gas = gas_guard.as_deref();
-            // SAFETY: nobody writes x, v or the warm start until the last pass below, after a
-            // barrier and after the last use of these; nobody writes the gradient and the gas
-            // coefficients from here on.
+            // SAFETY: nobody writes x and v until the last pass below, after a barrier and after
+            // the last use of these; nobody writes the gradient and the gas coefficients from
+            // here on.
             let sys = System {
                 model,
                 x: unsafe { xs.whole() },

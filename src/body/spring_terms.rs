@@ -5,7 +5,9 @@
 use glam::{Vec3, Vec3A};
 
 use super::coupling_slices::{Coupling, PackedCoupling};
-use super::springs::{MIN_LENGTH_RATIO, is_degenerate, spring_block_coefficients};
+#[cfg(target_arch = "x86_64")]
+use super::springs::MIN_LENGTH_RATIO;
+use super::springs::{is_degenerate, spring_block_coefficients};
 
 /// One spring's share of the assembly, seen from its first end (`Springs::ends[k][0]`): its
 /// share `h F + h² K v` of the right side (spring and damping force F), its coupling block in

@@ -103,7 +103,8 @@ impl SymmetricBlock {
         #[cfg(not(target_arch = "x86_64"))]
         {
             let [xx, yy, zz, xy, yz, zx] = self.0;
-            Vec3A::new(xx * r.x + xy * r.y + zx * r.z, xy * r.x + yy * r.y + yz * r.z, zx * r.x + yz * r.y + zz * r.z)
+            // The SSE2 path's sums in its order (the diagonal term, then the two others).
+            Vec3A::new(xx * r.x + xy * r.y + zx * r.z, yy * r.y + xy * r.x + yz * r.z, zz * r.z + zx * r.x + yz * r.y)
         }
     }
 }
