@@ -239,7 +239,9 @@ typedef struct SoftshellBodyDef {
   // Wind velocity, m/s. Default 0, 0, 0.
   float wind[3];
   // Wind drag coefficient, kg/(m^2 s): each face feels `drag ((wind - v)·n) n area`, in
-  // [0, 1e6]. Default 0 (no wind force).
+  // [0, 1e6]. Default 0 (no wind force). Over a (sub)step of length h a vertex of mass m
+  // takes its share times m / (m + h c), c the drag of its faces (`drag area / 3` each): the
+  // implicit response, which never carries it past the wind's speed however light it is.
   float drag;
   // Spring strain `(length - rest)/rest` above which a spring breaks and the surface cracks,
   // in [0, 1e6]. 0 (default) = never.

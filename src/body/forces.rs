@@ -6,7 +6,7 @@ use glam::Vec3;
 use super::gas::Gas;
 use super::settings::BodySettings;
 use super::springs::{Springs, spring_force};
-use super::wind::add_wind;
+use super::wind::{DragState, add_wind};
 
 /// What the force loops read from a body (borrowed for one substep).
 pub(crate) struct Model<'a> {
@@ -31,7 +31,13 @@ pub(crate) fn external_forces(model: &Model, x: &[Vec3], v: &[Vec3], f: &mut [Ve
     for (fi, &m) in f.iter_mut().zip(model.mass) {
         *fi = g * m;
     }
-    if model.has_wind() { add_wind(x, v, model.triangles, model.settings.wind, model.settings.drag, f) } else { 0.0 }
+    if model.has_wind() {
+        let h = model.settings.time_step / model.settings.substeps.max(1) as f32;
+        let state = DragState { x, v, triangles: model.triangles, mass: model.mass, h };
+        add_wind(&state, model.settings.wind, model.settings.drag, f)
+    } else {
+        0.0
+    }
 }
 
 /// Spring and damping forces added to `f` (SPEC 2.1 eq. 1-2).

@@ -17,7 +17,7 @@ use super::obstacles::{Obstacle, resolve};
 use super::settings::{BodySettings, Integrator};
 use super::springs::{Springs, spring_strain};
 use super::surface::{Fracture, Nodes, build_springs, rebuild_springs};
-use super::wind::add_wind;
+use super::wind::{DragState, add_wind};
 use super::xpbd::{self, XpbdScratch};
 use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::{Topology, TriMesh, first_degenerate_triangle, require_closed_oriented_solid};
@@ -337,7 +337,10 @@ impl Body {
             *fi += self.settings.gravity * m;
         }
         if self.settings.drag > 0.0 {
-            add_wind(&self.nodes.x, &self.nodes.v, &self.triangles, self.settings.wind, self.settings.drag, &mut f);
+            let h = self.settings.time_step / self.settings.substeps.max(1) as f32;
+            let state =
+                DragState { x: &self.nodes.x, v: &self.nodes.v, triangles: &self.triangles, mass: &self.nodes.mass, h };
+            add_wind(&state, self.settings.wind, self.settings.drag, &mut f);
         }
         std::mem::swap(&mut self.nodes.x, &mut self.saved_x);
         std::mem::swap(&mut self.nodes.v, &mut self.saved_v);
@@ -572,14 +575,9 @@ impl Body {
             self.wind_start.clone_from(&self.nodes.x);
             self.wind_force.clear();
             self.wind_force.resize(self.nodes.len(), Vec3::ZERO);
-            add_wind(
-                &self.nodes.x,
-                &self.nodes.v,
-                &self.triangles,
-                self.settings.wind,
-                self.settings.drag,
-                &mut self.wind_force,
-            );
+            let state =
+                DragState { x: &self.nodes.x, v: &self.nodes.v, triangles: &self.triangles, mass: &self.nodes.mass, h };
+            add_wind(&state, self.settings.wind, self.settings.drag, &mut self.wind_force);
         }
         let (_, iterations) = self.integrate(h);
         let work = if self.settings.drag > 0.0 {

@@ -16,16 +16,48 @@ pub(crate) fn face_drag(p: [Vec3; 3], v: [Vec3; 3], wind: Vec3, drag: f32) -> Ve
     area_vector * (drag * (wind - v_face).dot(area_vector) / area / 3.0)
 }
 
+/// What the drag acts on: the mesh at (x, v), the vertex masses and the step length `h` its
+/// force is held over.
+pub(crate) struct DragState<'a> {
+    pub x: &'a [Vec3],
+    pub v: &'a [Vec3],
+    pub triangles: &'a [[u32; 3]],
+    pub mass: &'a [f32],
+    pub h: f32,
+}
+
 /// Adds the wind force of every face to `f`; returns the power `Σ f·v` it delivers, W.
-pub(crate) fn add_wind(x: &[Vec3], v: &[Vec3], triangles: &[[u32; 3]], wind: Vec3, drag: f32, f: &mut [Vec3]) -> f64 {
+///
+/// Each vertex's drag is scaled by `m / (m + h c)` with `c = Σ drag A / 3` over its faces: the
+/// backward-Euler response of a mass `m` under a drag `c (w - v)` over a step `h`, which never
+/// overshoots the air's speed, where the force held for the whole step (explicit) reverses the
+/// relative velocity and grows it once `h c / m > 2`. (`c` bounds the coupling of a vertex
+/// through the face velocities: the three corners moving together feel `drag A / 3` each.) For
+/// a cloth, `h c / m` is small and the force is nearly unchanged; after a fracture storm,
+/// split nodes share their masses and small fragments went past the limit: with XPBD on a
+/// shattered balloon in wind the kinetic energy went from 20 J to 1e35 J in ten steps.
+pub(crate) fn add_wind(state: &DragState, wind: Vec3, drag: f32, f: &mut [Vec3]) -> f64 {
+    let DragState { x, v, triangles, mass, h } = *state;
+    let mut coefficient = vec![0.0f32; x.len()];
+    for t in triangles {
+        let p = t.map(|i| x[i as usize]);
+        let area = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
+        for &i in t {
+            coefficient[i as usize] += drag * area / 3.0;
+        }
+    }
+    for (c, &m) in coefficient.iter_mut().zip(mass) {
+        *c = if m > 0.0 { m / (m + h * *c) } else { 1.0 };
+    }
     let mut power = 0.0f64;
     for t in triangles {
         let p = t.map(|i| x[i as usize]);
         let vel = t.map(|i| v[i as usize]);
         let corner = face_drag(p, vel, wind, drag);
         for (k, &i) in t.iter().enumerate() {
-            f[i as usize] += corner;
-            power += corner.dot(vel[k]) as f64;
+            let force = corner * coefficient[i as usize];
+            f[i as usize] += force;
+            power += force.dot(vel[k]) as f64;
         }
     }
     power
@@ -34,6 +66,31 @@ pub(crate) fn add_wind(x: &[Vec3], v: &[Vec3], triangles: &[[u32; 3]], wind: Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One explicit step with the force `add_wind` returns never carries a face past the air's
+    /// speed along its normal, however light its corners (the held force would reverse the
+    /// relative velocity once `h c / m > 2`); for heavy corners it is the plain drag.
+    #[test]
+    fn the_drag_of_a_step_never_overshoots_the_wind() {
+        let x = [Vec3::ZERO, Vec3::X, Vec3::Z]; // normal -y, area 1/2
+        let triangles = [[0u32, 1, 2]];
+        let wind = Vec3::new(0.0, 4.0, 0.0);
+        let h = 1.0 / 60.0;
+        for m in [1e-6f32, 1e-3, 1.0, 1e3] {
+            let (v, mass) = ([Vec3::ZERO; 3], [m; 3]);
+            let mut f = [Vec3::ZERO; 3];
+            add_wind(&DragState { x: &x, v: &v, triangles: &triangles, mass: &mass, h }, wind, 2.0, &mut f);
+            let plain = face_drag(x, v, wind, 2.0);
+            for fi in f {
+                let speed = (fi * (h / m)).y;
+                assert!(speed > 0.0 && speed <= wind.y, "m = {m}: speed {speed}");
+                if m >= 1.0 {
+                    // h c / m = h (2 * 1/2 / 3) / m, under 0.6% at 1 kg.
+                    assert!((fi - plain).length() <= 1e-2 / m * plain.length(), "m = {m}: {fi} vs {plain}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn drag_is_normal_and_scales_with_area_and_relative_speed() {
