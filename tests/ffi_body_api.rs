@@ -235,3 +235,60 @@ fn results_do_not_depend_on_the_thread_count() {
         }
     }
 }
+
+/// A body of over 2,048 vertices stores them in an order of its own (`body::vertex_order`):
+/// numbering the same mesh another way gives the same motion, vertex for vertex, with pins and
+/// impulses on the same (renumbered) vertices, and every buffer in the caller's numbering.
+#[test]
+fn a_body_moves_the_same_however_its_mesh_is_numbered() {
+    let (p, t) = icosphere(4, 0.5);
+    let n = p.len() / 3;
+    // new index of vertex k: a fixed permutation (1237 is prime to 2562).
+    assert_eq!(n, 2562);
+    let renumber = |k: usize| (k * 1237 + 11) % n;
+    let mut q = vec![0.0f32; p.len()];
+    for k in 0..n {
+        q[3 * renumber(k)..3 * renumber(k) + 3].copy_from_slice(&p[3 * k..3 * k + 3]);
+    }
+    let u: Vec<u32> = t.iter().map(|&k| renumber(k as usize) as u32).collect();
+    let mut def = softshell_body_def_default();
+    def.gas_amount = 30.0;
+    def.ground = true;
+    def.ground_height = -0.6;
+    def.threads = 2;
+    let (pinned, pushed) = (5usize, 700usize);
+    let run = |positions: &[f32], triangles: &[u32], map: &dyn Fn(usize) -> usize| {
+        let body = body(positions, triangles, &def);
+        let start = snapshot(&body);
+        assert_eq!(start.positions, positions);
+        assert_eq!(start.triangles, triangles);
+        // SAFETY: live body, float[3].
+        unsafe {
+            assert_eq!(softshell_body_pin_vertex(body.0, map(pinned) as u32), SoftshellStatus::Ok);
+            let impulse = [0.0f32, 0.0, 0.05];
+            assert_eq!(softshell_body_apply_impulse(body.0, map(pushed) as u32, impulse.as_ptr()), SoftshellStatus::Ok);
+        }
+        let after_impulse = snapshot(&body);
+        let v = &after_impulse.velocities[3 * map(pushed)..3 * map(pushed) + 3];
+        let m = after_impulse.masses[map(pushed)];
+        assert!((v[2] * m - 0.05).abs() < 1e-6 && v[0] == 0.0, "the impulse went to vertex {}", map(pushed));
+        for _ in 0..40 {
+            step(&body);
+        }
+        let end = snapshot(&body);
+        assert_eq!(end.position(map(pinned)), start.position(map(pinned)), "the pinned vertex stayed");
+        // Back in the first numbering.
+        let positions: Vec<[f32; 3]> = (0..n).map(|k| end.position(map(k))).collect();
+        let masses: Vec<f32> = (0..n).map(|k| end.masses[map(k)]).collect();
+        (positions, masses)
+    };
+    let (a, mass_a) = run(&p, &t, &|k| k);
+    let (b, mass_b) = run(&q, &u, &renumber);
+    assert_eq!(mass_a, mass_b);
+    let fell = a.iter().map(|x| x[1]).fold(f32::MAX, f32::min);
+    assert!(fell < -0.55, "the ball reached the ground ({fell})");
+    for k in 0..n {
+        let d = (0..3).map(|c| (a[k][c] - b[k][c]).abs()).fold(0.0f32, f32::max);
+        assert!(d < 1e-4, "vertex {k}: {:?} vs {:?}", a[k], b[k]);
+    }
+}

@@ -264,3 +264,75 @@ fn each_closed_fragment_keeps_its_own_gas() {
     println!("two balls: nRT {g0:.2} -> {g1:.2} J");
     assert!(g1 < 0.8 * g0 && g1 > 0.4 * g0, "{g0} -> {g1}");
 }
+
+/// A body of over 2,048 vertices stores them in an order of its own (`body::vertex_order`): the
+/// cuts and cracks of the tests above, through the C ABI on such a body, keep every invariant
+/// in the caller's numbering (the vertices cut around keep their indices, the new ones are
+/// appended and map to their origins, nothing moves at a split).
+#[test]
+fn cuts_and_a_storm_on_a_large_body_keep_every_invariant_in_the_callers_numbering() {
+    let (positions, triangles) = icosphere(4, 0.5);
+    assert!(positions.len() / 3 >= 2048, "large enough to be reordered inside");
+    let mut def = softshell_body_def_default();
+    def.gravity = [0.0; 3];
+    def.gas_amount = 10.0;
+    def.spring_stiffness = 50.0;
+    def.spring_damping = 0.0;
+    def.break_strain = 0.1;
+    def.leak_rate = 1.0;
+    let body = body(&positions, &triangles, &def);
+    let start = snapshot(&body);
+    assert_eq!(start.positions, positions, "the caller's numbering out, before any step");
+    assert_eq!(start.triangles, triangles);
+    // Cut the ring around vertex 1000 (an index the body stores elsewhere).
+    let around = ring(&start, 1000);
+    let mut previous = start.clone();
+    for k in 0..around.len() {
+        let (a, b) = (around[k], around[(k + 1) % around.len()]);
+        // SAFETY: live body.
+        assert_eq!(unsafe { softshell_body_break_edge(body.0, a, b) }, SoftshellStatus::Ok, "{}", last_error());
+        let s = snapshot(&body);
+        old_sizes_are_refused(&body, &previous);
+        check_surface(&s, start.vertex_count());
+        check_split(&previous, &s, 1e-5);
+        previous = s;
+    }
+    assert_eq!(previous.fragment_count, 2, "the ring cut frees the fan of vertex 1000");
+    let piece = previous.fragments[previous.triangles.chunks_exact(3).position(|t| t.contains(&1000)).unwrap()];
+    assert_eq!(previous.fragments.iter().filter(|&&f| f == piece).count(), around.len());
+    for i in start.vertex_count()..previous.vertex_count() {
+        assert!(around.contains(&previous.origins[i]), "new vertex {i} comes from the cut ring");
+    }
+    // A storm: the x > 0 half thrown outwards cracks in one step.
+    for i in 0..previous.vertex_count() {
+        let p = previous.position(i);
+        if p[0] > 0.0 {
+            let m = previous.masses[i];
+            let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            let impulse = [6.0 * m * p[0] / r, 6.0 * m * p[1] / r, 6.0 * m * p[2] / r];
+            // SAFETY: live body, float[3].
+            assert_eq!(
+                unsafe { softshell_body_apply_impulse(body.0, i as u32, impulse.as_ptr()) },
+                SoftshellStatus::Ok
+            );
+        }
+    }
+    let before = snapshot(&body);
+    let (mass, momentum) = (before.total_mass(), before.momentum());
+    let stats = step(&body);
+    assert!(stats.springs_broken > 1000, "{} springs broke", stats.springs_broken);
+    old_sizes_are_refused(&body, &before);
+    let s = snapshot(&body);
+    check_surface(&s, start.vertex_count());
+    new_vertices_coincide(&s, before.vertex_count());
+    conserved(mass, momentum, &s, "storm on a large body");
+    // The thrown half moved outwards, the other half stayed near where it was: the impulses
+    // reached the vertices the caller named.
+    for i in 0..start.vertex_count() {
+        let (p0, p1) = (before.position(i), s.position(i));
+        let moved = (0..3).map(|k| (p1[k] - p0[k]) * p0[k]).sum::<f32>();
+        if p0[0] > 0.05 {
+            assert!(moved > 0.0, "thrown vertex {i} did not move outwards");
+        }
+    }
+}

@@ -30,6 +30,7 @@ mod spring_terms;
 mod springs;
 mod surface;
 mod symmetric_block;
+mod vertex_order;
 mod wind;
 mod xpbd;
 

@@ -2,6 +2,7 @@
 //! obstacles, the divergence check with rollback, the gas leak, then fracture at one point, after
 //! which springs, fragments and gas are rebuilt and the topology generation bumps.
 
+use std::borrow::Cow;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -17,6 +18,7 @@ use super::obstacles::{Obstacle, resolve};
 use super::settings::{BodySettings, Integrator};
 use super::springs::{Springs, spring_strain};
 use super::surface::{Fracture, Nodes, build_springs, rebuild_springs};
+use super::vertex_order::VertexOrder;
 use super::wind::{DragState, add_wind};
 use super::xpbd::{self, XpbdScratch};
 use crate::error::{Error, ErrorKind, Result};
@@ -98,6 +100,9 @@ pub struct Body {
     /// Shared with the step's own closure, which runs inside it (see [`Body::step`]).
     pool: std::sync::Arc<WorkerPool>,
     nodes: Nodes,
+    /// The caller's vertex indices and the body's (see `vertex_order`): every index in and out
+    /// of the body's pub functions is the caller's.
+    order: VertexOrder,
     saved_x: Vec<Vec3>,
     saved_v: Vec<Vec3>,
     /// Wind force and positions at the start of a substep (only with wind), for its work.
@@ -165,6 +170,16 @@ impl Body {
         if settings.gas_amount > 0.0 {
             require_closed_oriented_solid(mesh, topology, "a body with gas (gas_amount > 0)")?;
         }
+        // From here on in the body's vertex order (the triangles keep theirs).
+        let order = VertexOrder::new(&x);
+        let reordered;
+        let (x, triangles, topology) = if order.is_identity() {
+            (x, triangles, topology)
+        } else {
+            let triangles = VertexOrder::map_triangles(&triangles, |e| order.internal(e));
+            reordered = Topology::build(&triangles, x.len());
+            (order.to_internal(&x), triangles, &reordered)
+        };
         let n = x.len();
         // Masses by area: m_i = M (Σ_{f∋i} A_f / 3) / A.
         let mut lumped = vec![0.0f64; n];
@@ -210,6 +225,7 @@ impl Body {
             settings,
             pool,
             nodes,
+            order,
             saved_x: Vec::new(),
             saved_v: Vec::new(),
             wind_force: Vec::new(),
@@ -242,24 +258,33 @@ impl Body {
         &self.settings
     }
 
+    /// Per-vertex values of the body in the caller's order.
+    fn external<'a, T: Copy>(&self, values: &'a [T]) -> Cow<'a, [T]> {
+        if self.order.is_identity() { Cow::Borrowed(values) } else { Cow::Owned(self.order.to_external(values)) }
+    }
+
     /// Vertex positions.
-    pub fn positions(&self) -> &[Vec3] {
-        &self.nodes.x
+    pub fn positions(&self) -> Cow<'_, [Vec3]> {
+        self.external(&self.nodes.x)
     }
 
     /// Vertex velocities.
-    pub fn velocities(&self) -> &[Vec3] {
-        &self.nodes.v
+    pub fn velocities(&self) -> Cow<'_, [Vec3]> {
+        self.external(&self.nodes.v)
     }
 
     /// Vertex masses (pinned vertices keep theirs).
-    pub fn masses(&self) -> &[f32] {
-        &self.nodes.mass
+    pub fn masses(&self) -> Cow<'_, [f32]> {
+        self.external(&self.nodes.mass)
     }
 
     /// Triangles (counter-clockwise from outside).
-    pub fn triangles(&self) -> &[[u32; 3]] {
-        &self.triangles
+    pub fn triangles(&self) -> Cow<'_, [[u32; 3]]> {
+        if self.order.is_identity() {
+            Cow::Borrowed(&self.triangles)
+        } else {
+            Cow::Owned(VertexOrder::map_triangles(&self.triangles, |i| self.order.external(i)))
+        }
     }
 
     /// The connected piece of each triangle.
@@ -274,7 +299,9 @@ impl Body {
 
     /// For each vertex, the input vertex it was split from (identity before fracture).
     pub fn vertex_origin(&self, i: usize) -> u32 {
-        self.fracture.as_ref().map_or(i as u32, |f| f.origin[i])
+        let internal = self.order.internal(i);
+        let origin = self.fracture.as_ref().map_or(internal, |f| f.origin[internal] as usize);
+        self.order.external(origin) as u32
     }
 
     /// Bumped on every topology change.
@@ -304,7 +331,7 @@ impl Body {
                 "`{name}` = {vertex} is out of range: the body has {n} vertices"
             )));
         }
-        Ok(vertex as usize)
+        Ok(self.order.internal(vertex as usize))
     }
 
     /// Pins a vertex: it no longer moves (its velocity is set to zero; it keeps its mass).
@@ -476,6 +503,7 @@ impl Body {
             }
             if let Some(i) = self.nodes.x.iter().zip(&self.nodes.v).position(|(x, v)| !x.is_finite() || !v.is_finite())
             {
+                let i = self.order.external(i);
                 diverged = Some(format!("vertex {i} reached a NaN or infinite position or velocity"));
                 break;
             }
@@ -783,9 +811,8 @@ impl Body {
     /// Breaks the spring between vertices `a` and `b` by hand (an interactive cut), with the
     /// same crack as a spring over its strain limit. Error if they are not joined by a spring.
     pub fn break_edge(&mut self, a: u32, b: u32) -> Result<()> {
-        self.check_vertex(a, "a")?;
-        self.check_vertex(b, "b")?;
-        let key = [a.min(b), a.max(b)];
+        let (i, j) = (self.check_vertex(a, "a")? as u32, self.check_vertex(b, "b")? as u32);
+        let key = [i.min(j), i.max(j)];
         if a == b || !self.springs.ends.contains(&key) {
             return Err(Error::invalid_argument(format!(
                 "vertices {a} and {b} are not joined by a spring (not an edge of the current mesh, or already broken)"
@@ -845,6 +872,7 @@ impl Body {
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + self.nodes.memory_bytes()
+            + self.order.memory_bytes()
             + (self.saved_x.capacity()
                 + self.saved_v.capacity()
                 + self.wind_force.capacity()

@@ -715,7 +715,7 @@ pub unsafe extern "C" fn softshell_body_copy_masses(
             capacity,
             out_len,
             |b| b.masses().len(),
-            |b, dst| dst.copy_from_slice(b.masses()),
+            |b, dst| dst.copy_from_slice(&b.masses()),
         )
     }
     #[cfg(not(feature = "body"))]

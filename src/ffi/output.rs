@@ -199,6 +199,7 @@ pub unsafe extern "C" fn softshell_body_save_ply(
         {
             let inner = &body.body;
             let (positions, triangles) = (inner.positions(), inner.triangles());
+            let (positions, triangles) = (&positions[..], &triangles[..]);
             let speed: Vec<f32> = inner.velocities().iter().map(|v| v.length()).collect();
             let fragment = fragment_per_vertex(triangles, inner.fragment_ids(), positions.len());
             let shade: Vec<f32> = fragment.iter().map(|&f| fragment_shade(f)).collect();
@@ -239,7 +240,7 @@ pub unsafe extern "C" fn softshell_body_save_obj(body: *const SoftshellBody, pat
         let path = unsafe { arg_path(path, "path")? };
         #[cfg(feature = "body")]
         {
-            write_obj(body.body.positions(), body.body.triangles(), &path)
+            write_obj(&body.body.positions(), &body.body.triangles(), &path)
         }
         #[cfg(not(feature = "body"))]
         {
