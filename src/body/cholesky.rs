@@ -52,6 +52,10 @@ pub(crate) struct Cholesky {
     row_col: Vec<u32>,
     row_val: Vec<f32>,
     parts: Vec<Part>,
+    /// Per row of the top separator, where its entries in the second half's columns and in
+    /// the separator's own columns start (a row's entries are in ascending columns: the first
+    /// half's, the second half's, the separator's). Empty when the matrix is one leaf.
+    top_split: Vec<[u32; 2]>,
 }
 
 /// Nested dissection of the graph (`offsets`, `neighbors` in CSR form) by the positions `pos`;
@@ -258,6 +262,19 @@ impl Cholesky {
                 fill[r] += 1;
             }
         }
+        let top_split = match parts.last().and_then(|root| Some((root, root.children?))) {
+            Some((root, (_, b))) => {
+                let b = parts[b as usize];
+                (root.separator as usize..root.end as usize)
+                    .map(|k| {
+                        let row = &row_col[row_ptr[k] as usize..row_ptr[k + 1] as usize];
+                        let at = |end: u32| row_ptr[k] + row.partition_point(|&c| c < end) as u32;
+                        [at(b.start), at(b.end)]
+                    })
+                    .collect()
+            }
+            None => Vec::new(),
+        };
         Some(Self {
             perm,
             inv_diag: diag.iter().map(|&d| (1.0 / d) as f32).collect(),
@@ -268,6 +285,7 @@ impl Cholesky {
             row_col,
             row_val,
             parts,
+            top_split,
         })
     }
 
@@ -293,6 +311,7 @@ impl Cholesky {
             + self.row_val.capacity())
             * 4
             + self.parts.capacity() * std::mem::size_of::<Part>()
+            + self.top_split.capacity() * 8
     }
 
     /// `out[i] = A⁻¹ rhs` for the first `len()` entries, using `work` (resized) as scratch.
@@ -344,34 +363,56 @@ impl Cholesky {
         &self.perm
     }
 
-    /// The forward solve `L y = b` of part `node` alone, on this thread: with `separator_only`
-    /// of its separator rows only (the rows of its halves already solved), else of its whole
-    /// subtree. `y` (in the factor's order) holds b on entry.
-    ///
-    /// # Safety
-    /// `y` points to `len()` elements. Meanwhile no other thread reads or writes the rows this
-    /// call writes (its part's), or writes the rows it reads (earlier rows of its subtree).
-    pub unsafe fn forward_part(&self, node: usize, separator_only: bool, y: *mut Vec3A) {
-        let y = SharedSlice(y, self.len());
-        if separator_only {
-            self.forward_separator(node, y);
-        } else {
-            self.forward(node, y, false);
+    /// What half `half` (0 or 1, of [`Cholesky::top_halves`]) adds to the forward solve of
+    /// each row of the top separator: `out[k - separator.start] = Σ L[k][j] y[j]` over the
+    /// half's columns j, from `y` holding the half's forward solution. The two halves' parts are
+    /// independent: each member of a team makes its own after solving its half.
+    pub fn top_separator_part(&self, half: usize, y: &[Vec3A], out: &mut [Vec3A]) {
+        let root = self.parts[self.root()];
+        for (k, (o, split)) in (root.separator as usize..root.end as usize).zip(out.iter_mut().zip(&self.top_split)) {
+            let entries = if half == 0 {
+                self.row_ptr[k] as usize..split[0] as usize
+            } else {
+                split[0] as usize..split[1] as usize
+            };
+            *o = weighted_sum(y, &self.row_col[entries.clone()], &self.row_val[entries]);
         }
     }
 
-    /// The backward solve `Lᵀ x = y` of part `node` alone, on this thread, as
-    /// [`Cholesky::forward_part`] (the rows after the part's, its ancestors' separators, solved).
+    /// The forward and backward solve of the top separator's rows in `y` (holding their right
+    /// side), with the halves' parts `parts` ([`Cholesky::top_separator_part`]):
+    /// `y[k] = ((b[k] - part0[k]) - part1[k] - Σ_sep L[k][j] y[j]) / L[k][k]`, then `Lᵀ` over
+    /// the separator. Reads and writes only the separator's rows of `y` (so each member of a
+    /// team can solve it in a copy of its own, and none waits for another).
+    pub fn top_separator_solve(&self, y: &mut [Vec3A], parts: [&[Vec3A]; 2]) {
+        let root = self.root();
+        let part = self.parts[root];
+        for (t, (k, split)) in (part.separator as usize..part.end as usize).zip(&self.top_split).enumerate() {
+            let entries = split[1] as usize..self.row_ptr[k + 1] as usize;
+            let sum = weighted_sum(y, &self.row_col[entries.clone()], &self.row_val[entries]);
+            y[k] = (((y[k] - parts[0][t]) - parts[1][t]) - sum) * self.inv_diag[k];
+        }
+        self.backward_separator(root, SharedSlice(y.as_mut_ptr(), y.len()));
+    }
+
+    /// The forward solve `L y = b` of the subtree of part `node` alone, on this thread. `y` (in
+    /// the factor's order) holds b on entry.
+    ///
+    /// # Safety
+    /// `y` points to `len()` elements. Meanwhile no other thread reads or writes the rows this
+    /// call writes (its subtree's), or writes the rows it reads (earlier rows of its subtree).
+    pub unsafe fn forward_part(&self, node: usize, y: *mut Vec3A) {
+        self.forward(node, SharedSlice(y, self.len()), false);
+    }
+
+    /// The backward solve `Lᵀ x = y` of the subtree of part `node` alone, on this thread, as
+    /// [`Cholesky::forward_part`] (the rows after the subtree's, its ancestors' separators,
+    /// solved).
     ///
     /// # Safety
     /// As [`Cholesky::forward_part`], with the rows it reads being later ones.
-    pub unsafe fn backward_part(&self, node: usize, separator_only: bool, y: *mut Vec3A) {
-        let y = SharedSlice(y, self.len());
-        if separator_only {
-            self.backward_separator(node, y);
-        } else {
-            self.backward(node, y, false);
-        }
+    pub unsafe fn backward_part(&self, node: usize, y: *mut Vec3A) {
+        self.backward(node, SharedSlice(y, self.len()), false);
     }
 
     /// Forward solve `L y = b` on the rows of part `node` (its halves, then its separator).
@@ -545,5 +586,37 @@ mod tests {
             }
         }
         assert!(chol.fill() < n * 40, "fill {}", chol.fill());
+
+        // The split solve of a team (`implicit::Shared::coarse_part`): each half forward in a
+        // copy of its own with its part of the top separator, then in each copy the separator
+        // and that copy's half backward. The halves' rows together are the whole solve's.
+        let (half_a, half_b) = chol.top_halves().expect("900 rows split");
+        let (_, separator) = chol.part_rows(chol.root());
+        let rhs: Vec<Vec3A> = chol.perm().iter().map(|&i| b[i as usize]).collect();
+        let mut copies = [rhs.clone(), rhs.clone()];
+        let mut parts = [vec![Vec3A::ZERO; separator.len()], vec![Vec3A::ZERO; separator.len()]];
+        for (h, node) in [half_a, half_b].into_iter().enumerate() {
+            // SAFETY: a copy of this "member" alone.
+            unsafe { chol.forward_part(node, copies[h].as_mut_ptr()) };
+            chol.top_separator_part(h, &copies[h], &mut parts[h]);
+        }
+        let mut solved = vec![Vec3A::ZERO; n];
+        for (h, node) in [half_a, half_b].into_iter().enumerate() {
+            chol.top_separator_solve(&mut copies[h], [&parts[0], &parts[1]]);
+            // SAFETY: as above.
+            unsafe { chol.backward_part(node, copies[h].as_mut_ptr()) };
+            let (rows, _) = chol.part_rows(node);
+            solved[rows.clone()].copy_from_slice(&copies[h][rows]);
+        }
+        assert_eq!(copies[0][separator.clone()], copies[1][separator.clone()], "both copies solve the separator alike");
+        solved[separator.clone()].copy_from_slice(&copies[0][separator]);
+        let whole = first.unwrap();
+        for (k, &i) in chol.perm().iter().enumerate() {
+            let (got, want) = (solved[k], whole[i as usize]);
+            assert!(
+                (got - want).abs().max_element() <= 1e-4 * (1.0 + want.abs().max_element()),
+                "row {k}: {got} vs {want}"
+            );
+        }
     }
 }

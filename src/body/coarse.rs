@@ -48,6 +48,22 @@ pub(crate) struct CoarseSpace {
     /// The restricted residual and the solution in the factor's row order.
     rows_rhs: Vec<Vec3A>,
     rows_solution: Vec<Vec3A>,
+    /// The two members' own copies of the solution while they solve it (two times the rows),
+    /// and what each half adds to the top separator's rows (two times its rows), see
+    /// `implicit::Shared::coarse_part`.
+    own: Vec<Vec3A>,
+    separator_parts: Vec<Vec3A>,
+}
+
+/// The buffers of a coarse solve split among a team ([`CoarseSpace::split`]).
+pub(crate) struct CoarseBuffers<'a> {
+    /// The restricted residual and the solution in the factor's row order.
+    pub rhs: &'a mut [Vec3A],
+    pub solution: &'a mut [Vec3A],
+    /// Two copies of the solution, one per member solving a half.
+    pub own: &'a mut [Vec3A],
+    /// Per half, its part of the top separator's forward solve.
+    pub separator_parts: &'a mut [Vec3A],
 }
 
 /// What the members of a team read of a coarse space while they solve it together
@@ -207,7 +223,11 @@ impl CoarseSpace {
             members: Vec::new(),
             rows_rhs: vec![Vec3A::ZERO; count],
             rows_solution: vec![Vec3A::ZERO; count],
+            own: Vec::new(),
+            separator_parts: Vec::new(),
         };
+        space.own = vec![Vec3A::ZERO; 2 * count];
+        space.separator_parts = vec![Vec3A::ZERO; 2 * space.factor.part_rows(space.factor.root()).1.len()];
         space.index_rows();
         Some(space)
     }
@@ -236,9 +256,9 @@ impl CoarseSpace {
         self.index_rows();
     }
 
-    /// What a team reads (the factor and the aggregates), and the restricted residual and the
-    /// solution in the factor's row order, which its members write in turn.
-    pub fn split(&mut self) -> (CoarseView<'_>, &mut [Vec3A], &mut [Vec3A]) {
+    /// What a team reads (the factor and the aggregates), and the buffers its members write in
+    /// turn.
+    pub fn split(&mut self) -> (CoarseView<'_>, CoarseBuffers<'_>) {
         (
             CoarseView {
                 factor: &self.factor,
@@ -246,8 +266,12 @@ impl CoarseSpace {
                 member_offsets: &self.member_offsets,
                 members: &self.members,
             },
-            &mut self.rows_rhs,
-            &mut self.rows_solution,
+            CoarseBuffers {
+                rhs: &mut self.rows_rhs,
+                solution: &mut self.rows_solution,
+                own: &mut self.own,
+                separator_parts: &mut self.separator_parts,
+            },
         )
     }
 
@@ -277,7 +301,9 @@ impl CoarseSpace {
                 + self.solution.capacity()
                 + self.work.capacity()
                 + self.rows_rhs.capacity()
-                + self.rows_solution.capacity())
+                + self.rows_solution.capacity()
+                + self.own.capacity()
+                + self.separator_parts.capacity())
                 * 16
     }
 }

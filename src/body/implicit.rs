@@ -731,6 +731,8 @@ struct Shared<'a> {
     coarse: Option<CoarseView<'a>>,
     coarse_rhs: SharedSlice<'a, Vec3A>,
     coarse_solution: SharedSlice<'a, Vec3A>,
+    coarse_own: SharedSlice<'a, Vec3A>,
+    coarse_separator_parts: SharedSlice<'a, Vec3A>,
     coarse_dots: SharedSlice<'a, f64>,
 }
 
@@ -794,31 +796,22 @@ impl ChunkSums {
 
 impl Shared<'_> {
     /// The coarse system for the current residual, solved together: members 0 and 1 restrict
-    /// the residual to the rows of one half of the top dissection each and solve them forward,
-    /// member 0 the separator both ways, then each its half backward (with one member, member 0
-    /// all of it in the same order: the same bits). Returns the coarse part of `r·z`, the same on
-    /// every member.
+    /// the residual to the rows of one half of the top dissection each, solve them forward in
+    /// a copy of their own and add up their half's part of the top separator's rows; after a
+    /// barrier each solves the separator (its rows among themselves: a fifth of its entries on
+    /// the balloon) in its copy and then its half backward (with one member, member 0 all of it
+    /// in one copy: the same bits). Returns the coarse part of `r·z`, the same on every member.
+    ///
+    /// Member 0 solved the separator in the shared solution while member 1 waited, between two
+    /// barriers: on the balloon (benches/body_balloon.rs, 2 threads, four alternating pairs) the
+    /// step took 2.53-2.68 ms that way and 2.16-2.61 ms this way (6.5 -> 6.3 CG iterations per
+    /// step: the separator rows are summed in another order).
     fn coarse_part(&self, team: &Team) -> f64 {
         let Some(view) = &self.coarse else { return 0.0 };
         let factor = view.factor;
         let y = self.coarse_solution.as_mut_ptr();
         // SAFETY: nobody writes r in this pass.
         let r = unsafe { self.r.whole() };
-        // Restricts rows `rows` into the right side and the solution, forward solves `node`
-        // (its separator only when `separator_only`).
-        let start = |node: usize, separator_only: bool| {
-            let (subtree, separator) = factor.part_rows(node);
-            let rows = if separator_only { separator } else { subtree };
-            // SAFETY: the rows of this part are this member's alone in this pass (the halves go
-            // to different members, the separator to member 0 after a barrier).
-            let (rhs, solution) =
-                unsafe { (self.coarse_rhs.part(rows.clone()), self.coarse_solution.part(rows.clone())) };
-            view.restrict(rows, r, rhs);
-            solution.copy_from_slice(rhs);
-            // SAFETY: as above; the forward solve of a part reads only earlier rows of its own
-            // subtree.
-            unsafe { factor.forward_part(node, separator_only, y) };
-        };
         // `rhs·solution` over the rows of a part (its separator only when `separator_only`).
         let dot = |node: usize, separator_only: bool| -> f64 {
             let (subtree, separator) = factor.part_rows(node);
@@ -831,48 +824,84 @@ impl Shared<'_> {
         match factor.top_halves() {
             None => {
                 if team.index() == 0 {
-                    start(root, false);
+                    let rows = 0..factor.len();
                     // SAFETY: member 0 alone touches the coarse vectors in this pass.
-                    unsafe { factor.backward_part(root, false, y) };
+                    unsafe {
+                        let (rhs, solution) =
+                            (self.coarse_rhs.part(rows.clone()), self.coarse_solution.part(rows.clone()));
+                        view.restrict(rows, r, rhs);
+                        solution.copy_from_slice(rhs);
+                        factor.forward_part(root, y);
+                        factor.backward_part(root, y);
+                    }
                     // SAFETY: this member's slot.
                     unsafe { self.coarse_dots.part(0..3).copy_from_slice(&[dot(root, false), 0.0, 0.0]) };
                 }
                 team.barrier();
             }
             Some((a, b)) => {
-                let owner_b = if team.size() > 1 { 1 } else { 0 };
-                let halves = [(a, 0usize, 0), (b, owner_b, 1usize)];
-                for &(node, owner, _) in &halves {
-                    if owner == team.index() {
-                        start(node, false);
+                // Members 0 and 1 each solve a half in a copy of their own (member 0 both with
+                // one member), then the top separator (small: its rows among themselves) each
+                // in its copy from both halves' parts: one barrier between the halves' forward
+                // and backward solves, and nobody waits for a member solving the separator
+                // alone. Every row gets the same bits whoever solves it.
+                let halves = [a, b];
+                let me = team.index();
+                let solver = |half: usize| if team.size() > 1 { half } else { 0 };
+                let solves = me < 2 && (me == 0 || team.size() > 1);
+                let len = factor.len();
+                let (_, separator) = factor.part_rows(root);
+                let separator_len = separator.len();
+                if solves {
+                    // SAFETY: this member's copy (members 0 and 1 have one each).
+                    let own = unsafe { self.coarse_own.part(me * len..(me + 1) * len) };
+                    for (h, &node) in halves.iter().enumerate().filter(|&(h, _)| solver(h) == me) {
+                        let (rows, _) = factor.part_rows(node);
+                        // SAFETY: the half's rows and its slot of the parts are this member's.
+                        let (rhs, part) = unsafe {
+                            (
+                                self.coarse_rhs.part(rows.clone()),
+                                self.coarse_separator_parts.part(h * separator_len..(h + 1) * separator_len),
+                            )
+                        };
+                        view.restrict(rows.clone(), r, rhs);
+                        own[rows].copy_from_slice(rhs);
+                        // SAFETY: the member's own copy.
+                        unsafe { factor.forward_part(node, own.as_mut_ptr()) };
+                        factor.top_separator_part(h, own, part);
+                    }
+                    if me == 0 {
+                        // SAFETY: the separator rows of the right side are member 0's.
+                        let rhs = unsafe { self.coarse_rhs.part(separator.clone()) };
+                        view.restrict(separator.clone(), r, rhs);
+                        own[separator.clone()].copy_from_slice(rhs);
+                    } else {
+                        view.restrict(separator.clone(), r, &mut own[separator.clone()]);
                     }
                 }
-                if team.index() == 0 {
-                    // The separator's right side (its rows are written by nobody else).
-                    let (_, separator) = factor.part_rows(root);
-                    // SAFETY: the separator rows are member 0's in this pass.
-                    let rhs = unsafe { self.coarse_rhs.part(separator.clone()) };
-                    view.restrict(separator.clone(), r, rhs);
-                    // SAFETY: as above.
-                    unsafe { self.coarse_solution.part(separator) }.copy_from_slice(rhs);
-                }
                 team.barrier();
-                if team.index() == 0 {
-                    // SAFETY: member 0 alone works in this pass; the halves were solved before it.
-                    unsafe {
-                        factor.forward_part(root, true, y);
-                        factor.backward_part(root, true, y);
-                        self.coarse_dots.part(2..3)[0] = dot(root, true);
-                    }
-                }
-                team.barrier();
-                for &(node, owner, slot) in &halves {
-                    if owner == team.index() {
-                        // SAFETY: the half's rows are this member's; the separator rows it reads
-                        // were finished before the barrier and nobody writes them now.
+                if solves {
+                    // SAFETY: as above; nobody writes the parts in this pass.
+                    let (own, parts) = unsafe {
+                        (self.coarse_own.part(me * len..(me + 1) * len), self.coarse_separator_parts.whole())
+                    };
+                    factor.top_separator_solve(own, [&parts[..separator_len], &parts[separator_len..]]);
+                    for (h, &node) in halves.iter().enumerate().filter(|&(h, _)| solver(h) == me) {
+                        let (rows, _) = factor.part_rows(node);
+                        // SAFETY: the member's own copy; the half's rows of the right side, the
+                        // solution and its dot slot are this member's.
                         unsafe {
-                            factor.backward_part(node, false, y);
-                            self.coarse_dots.part(slot..slot + 1)[0] = dot(node, false);
+                            factor.backward_part(node, own.as_mut_ptr());
+                            self.coarse_solution.part(rows.clone()).copy_from_slice(&own[rows.clone()]);
+                            self.coarse_dots.part(h..h + 1)[0] = dot(node, false);
+                        }
+                    }
+                    if me == 0 {
+                        // SAFETY: the separator rows of the solution and the last slot are
+                        // member 0's.
+                        unsafe {
+                            self.coarse_solution.part(separator.clone()).copy_from_slice(&own[separator]);
+                            self.coarse_dots.part(2..3)[0] = dot(root, true);
                         }
                     }
                 }
@@ -1171,12 +1200,16 @@ pub(crate) fn substep(
         s.coarse_h = h;
     }
     let mut coarse = s.coarse.take();
-    let (coarse_view, coarse_rhs, coarse_solution) = match coarse.as_mut() {
+    let (coarse_view, coarse_buffers) = match coarse.as_mut() {
         Some(c) => {
-            let (view, rhs, solution) = c.split();
-            (Some(view), rhs, solution)
+            let (view, buffers) = c.split();
+            (Some(view), Some(buffers))
         }
-        None => (None, &mut [][..], &mut [][..]),
+        None => (None, None),
+    };
+    let (coarse_rhs, coarse_solution, coarse_own, coarse_separator_parts) = match coarse_buffers {
+        Some(b) => (b.rhs, b.solution, b.own, b.separator_parts),
+        None => (&mut [][..], &mut [][..], &mut [][..], &mut [][..]),
     };
     let shared = Shared {
         coupling_offsets: &s.couplings.offsets,
@@ -1203,6 +1236,8 @@ pub(crate) fn substep(
         coarse: coarse_view,
         coarse_rhs: SharedSlice::new(coarse_rhs),
         coarse_solution: SharedSlice::new(coarse_solution),
+        coarse_own: SharedSlice::new(coarse_own),
+        coarse_separator_parts: SharedSlice::new(coarse_separator_parts),
         coarse_dots: SharedSlice::new(&mut s.sums.coarse_dots),
     };
     let force = &s.force;
