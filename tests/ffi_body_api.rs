@@ -292,3 +292,69 @@ fn a_body_moves_the_same_however_its_mesh_is_numbered() {
         assert!(d < 1e-4, "vertex {k}: {:?} vs {:?}", a[k], b[k]);
     }
 }
+
+/// A reordered body (2,562 vertices) names the caller's vertices in its messages.
+#[test]
+fn messages_name_the_callers_indices_on_a_large_body() {
+    let (p, t) = icosphere(4, 0.5);
+    let n = p.len() / 3;
+    let def = softshell_body_def_default();
+    let b = body(&p, &t, &def);
+    // Two vertices not joined by an edge.
+    // SAFETY: live body.
+    let status = unsafe { softshell_body_break_edge(b.0, 1000, 17) };
+    assert_eq!(status, SoftshellStatus::InvalidArgument);
+    let m = last_error();
+    assert!(m.contains("1000") && m.contains("17"), "{m}");
+    // SAFETY: live body.
+    let status = unsafe { softshell_body_pin_vertex(b.0, n as u32) };
+    assert!(last_error().contains(&format!("{n}")));
+    assert_eq!(status, SoftshellStatus::InvalidArgument);
+    // Zero-length edge: move vertex t[1] onto t[0].
+    let (a, c) = (t[0] as usize, t[1] as usize);
+    let mut q = p.clone();
+    for k in 0..3 {
+        q[3 * c + k] = p[3 * a + k];
+    }
+    match try_body(&q, &t, &def) {
+        Ok(_) => panic!("accepted"),
+        Err((_, m)) => {
+            assert!(m.contains(&format!("{}", a.min(c))) && m.contains(&format!("{}", a.max(c))), "{m}");
+        }
+    }
+}
+
+/// Positions and triangles after `steps` steps of a gas body falling onto the ground.
+fn run_on_ground(p: &[f32], t: &[u32], threads: u32, steps: usize) -> (Vec<f32>, Vec<u32>) {
+    let mut def = softshell_body_def_default();
+    def.threads = threads;
+    def.gas_amount = 30.0;
+    def.substeps = 2;
+    def.ground = true;
+    def.ground_height = -0.6;
+    let b = body(p, t, &def);
+    for _ in 0..steps {
+        step(&b);
+    }
+    let s = snapshot(&b);
+    (s.positions, s.triangles)
+}
+
+/// Two balls of 2,562 vertices in one body (two fragments, each with its gas): the coarse
+/// level's split solve gives the same bits on 1, 2 and 3 threads.
+#[test]
+fn two_disjoint_balls_bit_identical_across_threads() {
+    let (p, t) = icosphere(4, 0.5);
+    let n = (p.len() / 3) as u32;
+    let mut q = p.clone();
+    for k in 0..p.len() / 3 {
+        q.push(p[3 * k] + 3.0);
+        q.push(p[3 * k + 1]);
+        q.push(p[3 * k + 2]);
+    }
+    let mut u = t.clone();
+    u.extend(t.iter().map(|&i| i + n));
+    let one = run_on_ground(&q, &u, 1, 20);
+    assert_eq!(one, run_on_ground(&q, &u, 2, 20));
+    assert_eq!(one, run_on_ground(&q, &u, 3, 20));
+}

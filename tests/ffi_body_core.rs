@@ -90,3 +90,50 @@ fn without_a_blow_or_with_a_high_limit_nothing_breaks() {
     let (_, _, _, stats) = hit(20.0, 0.0);
     assert_eq!(stats.cores_released, 0, "the gas alone must not release cores at this limit");
 }
+
+/// A core block released by a blow on vertex 1000 of a reordered body (2,562 vertices): the
+/// surface stays valid, every input vertex keeps its index and origin, the block holds vertex
+/// 1000, and every new vertex comes from a vertex near the blow.
+#[test]
+fn a_core_block_on_a_large_body_is_in_the_callers_numbering() {
+    let (positions, triangles) = icosphere(4, 0.5);
+    let n = positions.len() / 3;
+    let mut def = softshell_body_def_default();
+    def.gravity = [0.0; 3];
+    def.gas_amount = 10.0;
+    def.spring_stiffness = 1000.0;
+    def.break_force = 5.0;
+    let body = body(&positions, &triangles, &def);
+    let start = snapshot(&body);
+    let v = 1000usize;
+    let p = start.position(v);
+    let m = start.masses[v];
+    let speed = 30.0;
+    let impulse = [speed * m * p[0] / 0.5, speed * m * p[1] / 0.5, speed * m * p[2] / 0.5];
+    // SAFETY: live body, float[3].
+    assert_eq!(unsafe { softshell_body_apply_impulse(body.0, v as u32, impulse.as_ptr()) }, SoftshellStatus::Ok);
+    let stats = step(&body);
+    assert!(stats.cores_released >= 1);
+    let s = snapshot(&body);
+    check_surface(&s, n);
+    assert_eq!(s.origins[v], v as u32);
+    for i in 0..n {
+        assert_eq!(s.origins[i], i as u32);
+    }
+    let block = s.fragments[s.triangles.chunks_exact(3).position(|t| t.contains(&(v as u32))).unwrap()];
+    let main = *s.fragments.iter().max_by_key(|&&f| s.fragments.iter().filter(|&&g| g == f).count()).unwrap();
+    assert_ne!(block, main);
+    assert_eq!((n..s.vertex_count()).filter(|&i| s.origins[i] as usize == v).count(), 1);
+    let cb = (n..s.vertex_count()).find(|&i| s.origins[i] as usize == v).unwrap();
+    for i in n..s.vertex_count() {
+        let o = s.origins[i] as usize;
+        assert!(o < n);
+        let found = o == v
+            || s.position(i) == s.position(cb)
+            || (0..s.vertex_count()).any(|j| j != i && s.origins[j] as usize == o && s.position(j) == s.position(i));
+        assert!(found, "new vertex {i} origin {o}");
+        // Near the struck vertex.
+        let d: f32 = (0..3).map(|k| (s.position(i)[k] - s.position(v)[k]).powi(2)).sum::<f32>().sqrt();
+        assert!(d < 0.3, "new vertex {i} far from the blow: {d}");
+    }
+}

@@ -48,9 +48,9 @@ pub(crate) struct CoarseSpace {
     /// The restricted residual and the solution in the factor's row order.
     rows_rhs: Vec<Vec3A>,
     rows_solution: Vec<Vec3A>,
-    /// The two members' own copies of the solution while they solve it (two times the rows),
-    /// and what each half adds to the top separator's rows (two times its rows), see
-    /// `implicit::Shared::coarse_part`.
+    /// The own copies of the solution of the members solving it (two, or one for a one-thread
+    /// team), and what each half adds to the top separator's rows (two times its rows; none
+    /// when the factor is one leaf), see `implicit::Shared::coarse_part`.
     own: Vec<Vec3A>,
     separator_parts: Vec<Vec3A>,
 }
@@ -60,7 +60,7 @@ pub(crate) struct CoarseBuffers<'a> {
     /// The restricted residual and the solution in the factor's row order.
     pub rhs: &'a mut [Vec3A],
     pub solution: &'a mut [Vec3A],
-    /// Two copies of the solution, one per member solving a half.
+    /// A copy of the solution per member solving a half (one with a one-thread team).
     pub own: &'a mut [Vec3A],
     /// Per half, its part of the top separator's forward solve.
     pub separator_parts: &'a mut [Vec3A],
@@ -175,8 +175,9 @@ struct CsrGraph {
 
 impl CoarseSpace {
     /// Aggregates the vertices of `model` and factors the coarse matrix for substeps of `h`
-    /// (`x` places the aggregates for the ordering). None when the matrix cannot be factored.
-    pub fn new(model: &Model, x: &[Vec3], h: f32) -> Option<Self> {
+    /// (`x` places the aggregates for the ordering), for solves by a team of `threads` (the
+    /// members' own copies of the solution). None when the matrix cannot be factored.
+    pub fn new(model: &Model, x: &[Vec3], h: f32, threads: usize) -> Option<Self> {
         let n = x.len();
         let springs = &model.springs;
         let mut graph = CsrGraph {
@@ -226,8 +227,10 @@ impl CoarseSpace {
             own: Vec::new(),
             separator_parts: Vec::new(),
         };
-        space.own = vec![Vec3A::ZERO; 2 * count];
-        space.separator_parts = vec![Vec3A::ZERO; 2 * space.factor.part_rows(space.factor.root()).1.len()];
+        space.own = vec![Vec3A::ZERO; threads.clamp(1, 2) * count];
+        // (Only a factor split in two halves has a top separator to share.)
+        let separator = space.factor.top_halves().map_or(0, |_| space.factor.part_rows(space.factor.root()).1.len());
+        space.separator_parts = vec![Vec3A::ZERO; 2 * separator];
         space.index_rows();
         Some(space)
     }
@@ -343,7 +346,7 @@ mod tests {
             mass: &mass,
             inv_mass: &mass,
         };
-        let mut coarse = CoarseSpace::new(&model, &x, 1.0 / 60.0).unwrap();
+        let mut coarse = CoarseSpace::new(&model, &x, 1.0 / 60.0, 1).unwrap();
         let n = x.len();
         let count = coarse.restricted.len();
         assert!(coarse.aggregate.iter().all(|&g| (g as usize) < count));

@@ -1196,7 +1196,7 @@ pub(crate) fn substep(
     // The coarse level: made once (again only if the substep length changes; after a topology
     // change it is extended, not remade, so a cracking step costs no factorization).
     if s.coarse_h != h {
-        s.coarse = CoarseSpace::new(model, x, h);
+        s.coarse = CoarseSpace::new(model, x, h, pool.threads());
         s.coarse_h = h;
     }
     let mut coarse = s.coarse.take();

@@ -4,7 +4,7 @@
 //! midpoints of each level after all the vertices of the level before, so neighbours of a vertex
 //! lie all over the array. Every pass of a step gathers the neighbours of each vertex, and the
 //! worker threads split the vertices into consecutive blocks, so with such a numbering most
-//! gathers read lines another core has just written. A body larger than [`MIN_VERTICES`]
+//! gathers read lines another core has just written. A body of [`MIN_VERTICES`] or more
 //! therefore stores its initial vertices along a Morton (Z-order) curve of their rest positions
 //! and maps indices at its boundary: callers see their own numbering everywhere (positions,
 //! triangles, pins, impulses, cuts, origins), and vertices made by fracture are appended at the

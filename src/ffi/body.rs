@@ -575,7 +575,7 @@ pub unsafe extern "C" fn softshell_body_topology_generation(body: *const Softshe
 /// `body` must be NULL or a live body.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn softshell_body_vertex_count(body: *const SoftshellBody) -> usize {
-    body_getter!("softshell_body_vertex_count", body, |b| b.positions().len())
+    body_getter!("softshell_body_vertex_count", body, |b| b.vertex_count())
 }
 
 /// Number of triangles now (grows when core blocks are released); 0 for NULL.
@@ -584,7 +584,7 @@ pub unsafe extern "C" fn softshell_body_vertex_count(body: *const SoftshellBody)
 /// `body` must be NULL or a live body.
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn softshell_body_triangle_count(body: *const SoftshellBody) -> usize {
-    body_getter!("softshell_body_triangle_count", body, |b| b.triangles().len())
+    body_getter!("softshell_body_triangle_count", body, |b| b.triangle_count())
 }
 
 /// Number of connected pieces (fragments) now; 0 for NULL.
@@ -649,7 +649,7 @@ pub unsafe extern "C" fn softshell_body_copy_positions(
             out,
             capacity,
             out_len,
-            |b| b.positions().len() * 3,
+            |b| b.vertex_count() * 3,
             |b, dst| write_triples(dst, b.positions().iter().map(|p| p.to_array())),
         )
     }
@@ -681,7 +681,7 @@ pub unsafe extern "C" fn softshell_body_copy_velocities(
             out,
             capacity,
             out_len,
-            |b| b.velocities().len() * 3,
+            |b| b.vertex_count() * 3,
             |b, dst| write_triples(dst, b.velocities().iter().map(|p| p.to_array())),
         )
     }
@@ -714,7 +714,7 @@ pub unsafe extern "C" fn softshell_body_copy_masses(
             out,
             capacity,
             out_len,
-            |b| b.masses().len(),
+            |b| b.vertex_count(),
             |b, dst| dst.copy_from_slice(&b.masses()),
         )
     }
@@ -747,7 +747,7 @@ pub unsafe extern "C" fn softshell_body_copy_triangles(
             out,
             capacity,
             out_len,
-            |b| b.triangles().len() * 3,
+            |b| b.triangle_count() * 3,
             |b, dst| write_triples(dst, b.triangles().iter().copied()),
         )
     }
@@ -780,7 +780,7 @@ pub unsafe extern "C" fn softshell_body_copy_vertex_origins(
             out,
             capacity,
             out_len,
-            |b| b.positions().len(),
+            |b| b.vertex_count(),
             |b, dst| {
                 for (i, d) in dst.iter_mut().enumerate() {
                     *d = b.vertex_origin(i);
