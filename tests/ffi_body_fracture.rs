@@ -100,6 +100,24 @@ fn over_inflated_ball_cracks_and_deflates() {
     assert!(last.energy_drift.is_finite());
 }
 
+/// Gives every vertex with x > 0 (at its place in `s`) the impulse of a velocity `speed`
+/// away from the origin.
+fn throw_the_positive_x_half_outwards(body: &Body, s: &Snapshot, speed: f32) {
+    for i in 0..s.vertex_count() {
+        let p = s.position(i);
+        if p[0] > 0.0 {
+            let m = s.masses[i];
+            let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            let impulse = [speed * m * p[0] / r, speed * m * p[1] / r, speed * m * p[2] / r];
+            // SAFETY: live body, float[3].
+            assert_eq!(
+                unsafe { softshell_body_apply_impulse(body.0, i as u32, impulse.as_ptr()) },
+                SoftshellStatus::Ok
+            );
+        }
+    }
+}
+
 #[test]
 fn storm_half_the_springs_break_in_one_step() {
     let (positions, triangles) = icosphere(3, 0.5);
@@ -113,19 +131,7 @@ fn storm_half_the_springs_break_in_one_step() {
     let body = body(&positions, &triangles, &def);
     let start = snapshot(&body);
     // Throw the x > 0 half outwards at 6 m/s: in one step (h = 1/60) its springs stretch ~20 %.
-    for i in 0..start.vertex_count() {
-        let p = start.position(i);
-        if p[0] > 0.0 {
-            let m = start.masses[i];
-            let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-            let impulse = [6.0 * m * p[0] / r, 6.0 * m * p[1] / r, 6.0 * m * p[2] / r];
-            // SAFETY: live body, float[3].
-            assert_eq!(
-                unsafe { softshell_body_apply_impulse(body.0, i as u32, impulse.as_ptr()) },
-                SoftshellStatus::Ok
-            );
-        }
-    }
+    throw_the_positive_x_half_outwards(&body, &start, 6.0);
     let before = snapshot(&body);
     let (mass, momentum) = (before.total_mass(), before.momentum());
     let stats = step(&body);
@@ -304,19 +310,7 @@ fn cuts_and_a_storm_on_a_large_body_keep_every_invariant_in_the_callers_numberin
         assert!(around.contains(&previous.origins[i]), "new vertex {i} comes from the cut ring");
     }
     // A storm: the x > 0 half thrown outwards cracks in one step.
-    for i in 0..previous.vertex_count() {
-        let p = previous.position(i);
-        if p[0] > 0.0 {
-            let m = previous.masses[i];
-            let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-            let impulse = [6.0 * m * p[0] / r, 6.0 * m * p[1] / r, 6.0 * m * p[2] / r];
-            // SAFETY: live body, float[3].
-            assert_eq!(
-                unsafe { softshell_body_apply_impulse(body.0, i as u32, impulse.as_ptr()) },
-                SoftshellStatus::Ok
-            );
-        }
-    }
+    throw_the_positive_x_half_outwards(&body, &previous, 6.0);
     let before = snapshot(&body);
     let (mass, momentum) = (before.total_mass(), before.momentum());
     let stats = step(&body);
