@@ -10,9 +10,12 @@
 //! triangles, pins, impulses, cuts, origins), and vertices made by fracture are appended at the
 //! same index inside and out.
 //!
-//! On the issue-5 balloon (benches/body_balloon.rs, 10,242 vertices, 2 threads) the step took
-//! 3.95 ms in the icosphere's order and 2.65 ms along the curve, measured one after the other
-//! (the residual pass alone 326 -> 146 ms over 600 steps); on one thread 5.01 and 4.96 ms.
+//! On the issue-5 balloon (benches/body_balloon.rs, 10,242 vertices, 2 threads), with the mesh
+//! renumbered along such a curve before the body got it (the experiment that led here), the
+//! step took 3.95 ms in the icosphere's order and 2.65 ms along the curve, measured one after
+//! the other (the residual pass alone 326 -> 146 ms over 600 steps); on one thread 5.01 and
+//! 4.96 ms. With the order made here: 0.252 -> 0.242 of Bullet's step time in the peer script
+//! (benches/peers, mean step times; 0.229 -> 0.204 of the median step times).
 
 /// Meshes with fewer vertices keep their order (they fit in a core's cache, and one chunk of
 /// the implicit integrator's passes is 1,024 vertices).
