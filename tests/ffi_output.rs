@@ -332,6 +332,55 @@ mod body {
             softshell_mesh_free(mesh);
         }
     }
+
+    /// A body of 2,601 vertices (a cloth; stored in an order of its own inside) writes its OBJ
+    /// frame and its copies in the caller's numbering: before a step, the input itself.
+    #[cfg(feature = "obj")]
+    #[test]
+    fn a_large_body_writes_its_frame_in_the_callers_numbering() {
+        let side = 51u32;
+        let mut positions = Vec::new();
+        for k in 0..side * side {
+            // Numbered column by column, rows reversed: any numbering but a spatial one.
+            let (i, j) = (k / side, side - 1 - k % side);
+            positions.extend([i as f32 * 0.02, 0.0, j as f32 * 0.02]);
+        }
+        let at = |i: u32, j: u32| i * side + (side - 1 - j);
+        let mut triangles = Vec::new();
+        for i in 0..side - 1 {
+            for j in 0..side - 1 {
+                triangles.extend([at(i, j), at(i, j + 1), at(i + 1, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)]);
+            }
+        }
+        let path = temp("large_body.obj");
+        // SAFETY: live arrays, def and path; the meshes are freed below.
+        unsafe {
+            let mut mesh = null_mut();
+            let status = softshell_mesh_from_arrays(
+                positions.as_ptr(),
+                positions.len() / 3,
+                triangles.as_ptr(),
+                triangles.len() / 3,
+                &mut mesh,
+            );
+            assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+            let def = softshell_body_def_default();
+            let mut raw = null_mut();
+            assert_eq!(softshell_body_new(mesh, &def, &mut raw), SoftshellStatus::Ok, "{}", last_error());
+            softshell_mesh_free(mesh);
+            let body = Body(raw);
+            assert_eq!(copy_f32(|o, c, n| softshell_body_copy_positions(body.0, o, c, n)), positions);
+            assert_eq!(copy_u32(|o, c, n| softshell_body_copy_triangles(body.0, o, c, n)), triangles);
+            assert_eq!(softshell_body_save_obj(body.0, c_path(&path).as_ptr()), SoftshellStatus::Ok);
+            let mut back = null_mut();
+            assert_eq!(softshell_mesh_load_obj(c_path(&path).as_ptr(), &mut back), SoftshellStatus::Ok);
+            let read = copy_f32(|o, c, n| softshell_mesh_copy_positions(back, o, c, n));
+            assert_eq!(copy_u32(|o, c, n| softshell_mesh_copy_triangles(back, o, c, n)), triangles);
+            softshell_mesh_free(back);
+            assert_eq!(read.len(), positions.len());
+            assert!(read.iter().zip(&positions).all(|(a, b)| (a - b).abs() <= 1e-6), "OBJ positions differ");
+        }
+    }
 }
 
 #[cfg(feature = "lattice")]

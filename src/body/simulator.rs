@@ -2,7 +2,6 @@
 //! obstacles, the divergence check with rollback, the gas leak, then fracture at one point, after
 //! which springs, fragments and gas are rebuilt and the topology generation bumps.
 
-use std::borrow::Cow;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -270,33 +269,30 @@ impl Body {
         self.triangles.len()
     }
 
-    /// Per-vertex values of the body in the caller's order.
-    fn external<'a, T: Copy>(&self, values: &'a [T]) -> Cow<'a, [T]> {
-        if self.order.is_identity() { Cow::Borrowed(values) } else { Cow::Owned(self.order.to_external(values)) }
+    /// Per-vertex values of the body in the caller's order (no copy of the whole body: the
+    /// C ABI's copy functions write them straight into the caller's buffer every frame).
+    fn in_callers_order<'a, T: Copy>(&'a self, values: &'a [T]) -> impl ExactSizeIterator<Item = T> + 'a {
+        (0..values.len()).map(move |k| values[self.order.internal(k)])
     }
 
-    /// Vertex positions.
-    pub fn positions(&self) -> Cow<'_, [Vec3]> {
-        self.external(&self.nodes.x)
+    /// Vertex positions, in the caller's order.
+    pub fn positions(&self) -> impl ExactSizeIterator<Item = Vec3> + '_ {
+        self.in_callers_order(&self.nodes.x)
     }
 
-    /// Vertex velocities.
-    pub fn velocities(&self) -> Cow<'_, [Vec3]> {
-        self.external(&self.nodes.v)
+    /// Vertex velocities, in the caller's order.
+    pub fn velocities(&self) -> impl ExactSizeIterator<Item = Vec3> + '_ {
+        self.in_callers_order(&self.nodes.v)
     }
 
-    /// Vertex masses (pinned vertices keep theirs).
-    pub fn masses(&self) -> Cow<'_, [f32]> {
-        self.external(&self.nodes.mass)
+    /// Vertex masses (pinned vertices keep theirs), in the caller's order.
+    pub fn masses(&self) -> impl ExactSizeIterator<Item = f32> + '_ {
+        self.in_callers_order(&self.nodes.mass)
     }
 
-    /// Triangles (counter-clockwise from outside).
-    pub fn triangles(&self) -> Cow<'_, [[u32; 3]]> {
-        if self.order.is_identity() {
-            Cow::Borrowed(&self.triangles)
-        } else {
-            Cow::Owned(VertexOrder::map_triangles(&self.triangles, |i| self.order.external(i)))
-        }
+    /// Triangles (counter-clockwise from outside), with the caller's vertex indices.
+    pub fn triangles(&self) -> impl ExactSizeIterator<Item = [u32; 3]> + '_ {
+        self.triangles.iter().map(|t| t.map(|i| self.order.external(i as usize) as u32))
     }
 
     /// The connected piece of each triangle.

@@ -88,14 +88,6 @@ impl VertexOrder {
         self.external_of.iter().map(|&e| values[e as usize]).collect()
     }
 
-    /// `values` (in the body's order, one per vertex) in the caller's order.
-    pub fn to_external<T: Copy>(&self, values: &[T]) -> Vec<T> {
-        let n = self.internal_of.len();
-        let mut out: Vec<T> = self.internal_of.iter().map(|&i| values[i as usize]).collect();
-        out.extend_from_slice(&values[n..]);
-        out
-    }
-
     /// Triangles with every corner mapped by `map` (`internal` or `external`).
     pub fn map_triangles(triangles: &[[u32; 3]], map: impl Fn(usize) -> usize) -> Vec<[u32; 3]> {
         triangles.iter().map(|t| t.map(|i| map(i as usize) as u32)).collect()
@@ -136,16 +128,14 @@ mod tests {
             assert_eq!(order.external(i), e);
         }
         assert_eq!((order.internal(3000), order.external(3007)), (3000, 3007));
-        // Values round-trip, with values of appended vertices left in place.
+        // Values move with their vertices.
         let internal = order.to_internal(&points);
         for e in 0..points.len() {
             assert_eq!(internal[order.internal(e)], points[e]);
         }
-        let mut with_new = internal.clone();
-        with_new.push(Vec3::splat(9.0));
-        let back = order.to_external(&with_new);
-        assert_eq!(&back[..3000], &points[..]);
-        assert_eq!(back[3000], Vec3::splat(9.0));
+        for (i, p) in internal.iter().enumerate() {
+            assert_eq!(*p, points[order.external(i)]);
+        }
         let t = VertexOrder::map_triangles(&[[0, 1, 3000]], |e| order.internal(e));
         assert_eq!(VertexOrder::map_triangles(&t, |i| order.external(i)), vec![[0, 1, 3000]]);
     }

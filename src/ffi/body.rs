@@ -650,7 +650,7 @@ pub unsafe extern "C" fn softshell_body_copy_positions(
             capacity,
             out_len,
             |b| b.vertex_count() * 3,
-            |b, dst| write_triples(dst, b.positions().iter().map(|p| p.to_array())),
+            |b, dst| write_triples(dst, b.positions().map(|p| p.to_array())),
         )
     }
     #[cfg(not(feature = "body"))]
@@ -682,7 +682,7 @@ pub unsafe extern "C" fn softshell_body_copy_velocities(
             capacity,
             out_len,
             |b| b.vertex_count() * 3,
-            |b, dst| write_triples(dst, b.velocities().iter().map(|p| p.to_array())),
+            |b, dst| write_triples(dst, b.velocities().map(|p| p.to_array())),
         )
     }
     #[cfg(not(feature = "body"))]
@@ -715,7 +715,11 @@ pub unsafe extern "C" fn softshell_body_copy_masses(
             capacity,
             out_len,
             |b| b.vertex_count(),
-            |b, dst| dst.copy_from_slice(&b.masses()),
+            |b, dst| {
+                for (d, m) in dst.iter_mut().zip(b.masses()) {
+                    *d = m;
+                }
+            },
         )
     }
     #[cfg(not(feature = "body"))]
@@ -748,7 +752,7 @@ pub unsafe extern "C" fn softshell_body_copy_triangles(
             capacity,
             out_len,
             |b| b.triangle_count() * 3,
-            |b, dst| write_triples(dst, b.triangles().iter().copied()),
+            |b, dst| write_triples(dst, b.triangles()),
         )
     }
     #[cfg(not(feature = "body"))]

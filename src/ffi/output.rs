@@ -198,9 +198,9 @@ pub unsafe extern "C" fn softshell_body_save_ply(
         #[cfg(feature = "body")]
         {
             let inner = &body.body;
-            let (positions, triangles) = (inner.positions(), inner.triangles());
+            let (positions, triangles): (Vec<_>, Vec<_>) = (inner.positions().collect(), inner.triangles().collect());
             let (positions, triangles) = (&positions[..], &triangles[..]);
-            let speed: Vec<f32> = inner.velocities().iter().map(|v| v.length()).collect();
+            let speed: Vec<f32> = inner.velocities().map(|v| v.length()).collect();
             let fragment = fragment_per_vertex(triangles, inner.fragment_ids(), positions.len());
             let shade: Vec<f32> = fragment.iter().map(|&f| fragment_shade(f)).collect();
             let boundary = boundary_flags(triangles, positions.len());
@@ -240,7 +240,7 @@ pub unsafe extern "C" fn softshell_body_save_obj(body: *const SoftshellBody, pat
         let path = unsafe { arg_path(path, "path")? };
         #[cfg(feature = "body")]
         {
-            write_obj(&body.body.positions(), &body.body.triangles(), &path)
+            write_obj(&body.body.positions().collect::<Vec<_>>(), &body.body.triangles().collect::<Vec<_>>(), &path)
         }
         #[cfg(not(feature = "body"))]
         {
