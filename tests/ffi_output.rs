@@ -5,6 +5,8 @@
 #![cfg(any(feature = "shell", feature = "body", feature = "lattice"))]
 #![allow(dead_code)] // helpers shared by the parts, each compiled only with its feature
 
+#[cfg(feature = "body")]
+mod body_util;
 mod common;
 
 use std::ffi::CString;
@@ -338,36 +340,15 @@ mod body {
     #[cfg(feature = "obj")]
     #[test]
     fn a_large_body_writes_its_frame_in_the_callers_numbering() {
-        let side = 51u32;
-        let mut positions = Vec::new();
-        for k in 0..side * side {
-            // Numbered column by column, rows reversed: any numbering but a spatial one.
-            let (i, j) = (k / side, side - 1 - k % side);
-            positions.extend([i as f32 * 0.02, 0.0, j as f32 * 0.02]);
-        }
-        let at = |i: u32, j: u32| i * side + (side - 1 - j);
-        let mut triangles = Vec::new();
-        for i in 0..side - 1 {
-            for j in 0..side - 1 {
-                triangles.extend([at(i, j), at(i, j + 1), at(i + 1, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)]);
-            }
-        }
+        // Numbered row by row: not the order the body keeps inside.
+        let (positions, triangles) = crate::body_util::cloth(51, 1.0);
         let path = temp("large_body.obj");
-        // SAFETY: live arrays, def and path; the meshes are freed below.
+        let mesh = crate::body_util::Mesh::new(&positions, &triangles);
+        // SAFETY: live mesh, def and path; the mesh read back is freed below.
         unsafe {
-            let mut mesh = null_mut();
-            let status = softshell_mesh_from_arrays(
-                positions.as_ptr(),
-                positions.len() / 3,
-                triangles.as_ptr(),
-                triangles.len() / 3,
-                &mut mesh,
-            );
-            assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
             let def = softshell_body_def_default();
             let mut raw = null_mut();
-            assert_eq!(softshell_body_new(mesh, &def, &mut raw), SoftshellStatus::Ok, "{}", last_error());
-            softshell_mesh_free(mesh);
+            assert_eq!(softshell_body_new(mesh.0, &def, &mut raw), SoftshellStatus::Ok, "{}", last_error());
             let body = Body(raw);
             assert_eq!(copy_f32(|o, c, n| softshell_body_copy_positions(body.0, o, c, n)), positions);
             assert_eq!(copy_u32(|o, c, n| softshell_body_copy_triangles(body.0, o, c, n)), triangles);
