@@ -128,8 +128,19 @@ pub struct Body {
     /// last topology change): the next step starts from them instead of measuring again.
     /// Cleared by everything that changes the state between steps (impulses, pins).
     energy_now: Option<EnergyParts>,
+    /// The energy (J) that the last step of an explicit integrator gained beyond its allowance
+    /// (see [`EXCESS_GROWTH_RATIO`]), 0 when it stayed within it.
+    last_excess_growth: f64,
     last: BodyStats,
 }
+
+/// An explicit step whose energy grows beyond its allowance (half the kinetic and spring energy
+/// at hand) by more than this many times the step before's excess diverges. A constant force
+/// makes explicit Euler gain the same `(h F)²/2m` every step (ratio 1) and symplectic Euler lose
+/// it; an unstable mode multiplies its energy by `(1 + h²ω²)` or more per step, and the case that
+/// needed this rule (g = 1e4 onto the ground, tests/stability.rs) grew 5,000 times per step
+/// while every step stayed within one step's impulse of its own exploding forces.
+const EXCESS_GROWTH_RATIO: f64 = 4.0;
 
 /// Prints how long a phase of the fracture took when SOFTSHELL_TRACE_FRACTURE is set (a
 /// measuring aid for the benchmarks; off by default).
@@ -246,6 +257,7 @@ impl Body {
             external_work: 0.0,
             energy_start: 0.0,
             energy_now: None,
+            last_excess_growth: 0.0,
             last: BodyStats::default(),
         };
         let energies = body.energy_parts();
@@ -557,12 +569,31 @@ impl Body {
                 // the forces can give from rest): it catches the blow-up steps earlier.
                 let growth = after.total() - before.total() - work;
                 let allowed = 0.5 * (before.kinetic + before.spring) + 1e-9;
-                if growth > allowed && growth > allowed + 2.0 * self.impulse_bound(before_forces_h) {
+                let excess = growth > allowed;
+                if excess && growth > allowed + 2.0 * self.impulse_bound(before_forces_h) {
                     diverged = Some(format!(
                         "the energy grew by {growth:.3e} J in one step without a source (kinetic + spring energy \
                          before: {:.3e} J)",
                         before.kinetic + before.spring
                     ));
+                } else if excess
+                    && self.last_excess_growth > 0.0
+                    && growth > EXCESS_GROWTH_RATIO * self.last_excess_growth
+                {
+                    // Within one step's impulse, but the second step in a row over the allowance
+                    // and many times the first: the geometric growth of an unstable explicit
+                    // step, whose impulse bound grows with it (the forces of an exploding state
+                    // are huge), so the test above never catches it.
+                    diverged = Some(format!(
+                        "the energy grew by {growth:.3e} J in one step without a source, {:.0} times the {:.3e} J \
+                         of the step before (kinetic + spring energy before: {:.3e} J)",
+                        growth / self.last_excess_growth,
+                        self.last_excess_growth,
+                        before.kinetic + before.spring
+                    ));
+                }
+                if diverged.is_none() {
+                    self.last_excess_growth = if excess { growth } else { 0.0 };
                 }
             }
         }
