@@ -81,6 +81,15 @@ impl WorkerPool {
         f()
     }
 
+    /// Runs `a` and `b`, at the same time when the pool has workers; returns both results.
+    pub fn join<A: Send, B: Send>(&self, a: impl FnOnce() -> A + Send, b: impl FnOnce() -> B + Send) -> (A, B) {
+        #[cfg(feature = "parallel")]
+        if self.pool.is_some() {
+            return self.install(|| rayon::join(a, b));
+        }
+        (a(), b())
+    }
+
     /// Calls `f(chunk_index, chunk)` for consecutive chunks of `chunk_len` elements of `data`, in
     /// parallel when the pool has workers. The chunking does not depend on the thread count.
     pub fn for_each_chunk_mut<T: Send>(

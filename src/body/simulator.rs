@@ -134,6 +134,12 @@ pub struct Body {
     last: BodyStats,
 }
 
+/// The fraction by which a body that may crack has room to grow (vertices, edges, faces) in the
+/// buffers the fracture writes: within it a cracking step moves no array and allocates no large
+/// one. Measured on the issue-5 balloon's first cracking step (benches/body_balloon.rs, 276
+/// springs, 231 page faults in the topology update before, 0.9 MB of new arrays).
+const FRACTURE_HEADROOM: f64 = 0.125;
+
 /// An explicit step whose energy grows beyond its allowance (half the kinetic and spring energy
 /// at hand) by more than this many times the step before's excess diverges. A constant force
 /// makes explicit Euler gain the same `(h F)²/2m` every step (ratio 1) and symplectic Euler lose
@@ -207,7 +213,7 @@ impl Body {
         }
         let mass: Vec<f32> = lumped.iter().map(|&a| (settings.total_mass as f64 * a / area) as f32).collect();
         let inv_mass = mass.iter().map(|&m| if m > 0.0 { 1.0 / m } else { 0.0 }).collect();
-        let nodes = Nodes { v: vec![Vec3::ZERO; n], rest: x.clone(), x, mass, inv_mass };
+        let mut nodes = Nodes { v: vec![Vec3::ZERO; n], rest: x.clone(), x, mass, inv_mass };
         let springs = build_springs(topology, None, &nodes.rest);
         let face_fragment = topology.face_components.clone();
         let fragment_count = topology.component_count;
@@ -221,8 +227,18 @@ impl Body {
             }
             gas
         });
-        let fracture = settings.fracture_enabled().then(|| Fracture::new(n, triangles.len()));
-        let kept_topology = settings.fracture_enabled().then(|| topology.clone());
+        // A body that may crack gets its fracture buffers now, with room to grow (see
+        // `FRACTURE_HEADROOM`).
+        let fracture =
+            settings.fracture_enabled().then(|| Fracture::ready_to_crack(topology, triangles.len(), FRACTURE_HEADROOM));
+        let kept_topology = settings.fracture_enabled().then(|| {
+            let mut kept = topology.clone();
+            kept.reserve_headroom(FRACTURE_HEADROOM);
+            kept
+        });
+        if settings.fracture_enabled() {
+            nodes.reserve((n as f64 * FRACTURE_HEADROOM).ceil() as usize);
+        }
         let mut obstacles = Vec::new();
         if settings.ground {
             obstacles.push(Obstacle::Plane { point: Vec3::new(0.0, settings.ground_height, 0.0), normal: Vec3::Y });
@@ -788,19 +804,22 @@ impl Body {
             let mut vertices: Vec<u32> = pairs.iter().flatten().copied().collect();
             vertices.sort_unstable();
             vertices.dedup();
-            let before = self.triangles.clone();
+            let mut before = std::mem::take(&mut fracture.before);
+            before.clone_from(&self.triangles);
             if crack::split_fans(fracture, &topology, &mut self.triangles, &mut self.nodes, &vertices) > 0 {
                 trace_phase("cracks: split", t);
                 let t = Instant::now();
-                topology.update(&before, &self.triangles, self.nodes.len());
+                topology.update_with(&before, &self.triangles, self.nodes.len(), &mut fracture.spare);
                 trace_phase("cracks: topology update", t);
             }
+            fracture.before = before;
         }
         trace_phase("cracks", t);
         let t = Instant::now();
         let mut released = 0;
         if !cores.is_empty() {
-            let before = self.triangles.clone();
+            let mut before = std::mem::take(&mut fracture.before);
+            before.clone_from(&self.triangles);
             let mut touched = vec![false; self.nodes.len()];
             for &v in cores {
                 if core_block::release(fracture, &topology, &mut self.triangles, &mut self.nodes, &mut touched, v) {
@@ -808,8 +827,9 @@ impl Body {
                 }
             }
             if released > 0 {
-                topology.update(&before, &self.triangles, self.nodes.len());
+                topology.update_with(&before, &self.triangles, self.nodes.len(), &mut fracture.spare);
             }
+            fracture.before = before;
         }
         trace_phase("cores", t);
         debug_assert!(
@@ -830,19 +850,30 @@ impl Body {
     fn rebuild(&mut self, topology: Topology, old_face_fragment: &[u32]) {
         let n = self.nodes.len();
         let t = Instant::now();
-        let old = std::mem::take(&mut self.springs);
-        self.springs = rebuild_springs(&topology, self.fracture.as_ref(), &self.nodes.rest, old);
-        trace_phase("rebuild: springs", t);
-        let t = Instant::now();
-        self.face_fragment = topology.face_components.clone();
+        let old_springs = std::mem::take(&mut self.springs);
+        self.face_fragment.clone_from(&topology.face_components);
         self.fragment_count = topology.component_count;
-        if let Some(old) = self.gas.take() {
-            let mut gas =
-                Gas::new(n, &self.triangles, &self.face_fragment, self.fragment_count, &topology.boundary_loops);
-            gas.inherit(&old.n_rt, &old.volume, old_face_fragment, &self.face_fragment, &self.nodes.x, &self.triangles);
-            self.gas = Some(gas);
-        }
-        trace_phase("rebuild: gas", t);
+        let old_gas = self.gas.take();
+        // The springs and the gas do not depend on each other: built at the same time (about
+        // 0.6 ms each on the issue-5 balloon's first cracking step).
+        let (springs, gas) = {
+            let (topology, fracture, nodes) = (&topology, self.fracture.as_ref(), &self.nodes);
+            let (triangles, face_fragment, fragment_count) =
+                (&self.triangles, &self.face_fragment, self.fragment_count);
+            self.pool.join(
+                || rebuild_springs(topology, fracture, &nodes.rest, old_springs),
+                || {
+                    old_gas.map(|old| {
+                        let mut gas = Gas::new(n, triangles, face_fragment, fragment_count, &topology.boundary_loops);
+                        gas.inherit(&old.n_rt, &old.volume, old_face_fragment, face_fragment, &nodes.x, triangles);
+                        gas
+                    })
+                },
+            )
+        };
+        self.springs = springs;
+        self.gas = gas;
+        trace_phase("rebuild: springs and gas", t);
         self.topology = Some(topology);
         self.generation += 1;
     }

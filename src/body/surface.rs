@@ -4,7 +4,7 @@
 use glam::Vec3;
 
 use super::springs::Springs;
-use crate::mesh::Topology;
+use crate::mesh::{Topology, TopologySpare};
 
 /// Per-vertex state, structure of arrays.
 #[derive(Clone, Debug, Default)]
@@ -22,6 +22,15 @@ pub(crate) struct Nodes {
 impl Nodes {
     pub fn len(&self) -> usize {
         self.x.len()
+    }
+
+    /// Room for `more` vertices in every array (appended by fracture without moving them).
+    pub fn reserve(&mut self, more: usize) {
+        self.x.reserve(more);
+        self.v.reserve(more);
+        self.mass.reserve(more);
+        self.inv_mass.reserve(more);
+        self.rest.reserve(more);
     }
 
     pub fn is_pinned(&self, i: usize) -> bool {
@@ -42,21 +51,46 @@ impl Nodes {
 }
 
 /// Fracture bookkeeping (allocated only when the body can break).
-#[derive(Clone, Debug, Default)]
+#[derive(Debug, Default)]
 pub(crate) struct Fracture {
     /// Per face, bit k set when side k (corner k to corner k+1) is a broken spring.
     pub broken: Vec<u8>,
     /// Per vertex, the input-mesh vertex it was split from.
     pub origin: Vec<u32>,
+    /// The buffers a topology change builds the next topology in (see [`TopologySpare`]) and
+    /// the triangles before the change: kept, so that a cracking step allocates no large array
+    /// (whose first-touch page faults cost more than the work).
+    pub spare: TopologySpare,
+    pub before: Vec<[u32; 3]>,
 }
 
 impl Fracture {
     pub fn new(vertex_count: usize, face_count: usize) -> Self {
-        Self { broken: vec![0; face_count], origin: (0..vertex_count as u32).collect() }
+        Self {
+            broken: vec![0; face_count],
+            origin: (0..vertex_count as u32).collect(),
+            spare: TopologySpare::default(),
+            before: Vec::new(),
+        }
+    }
+
+    /// [`Fracture::new`] for a body of `topology` that will crack: its spare buffers made
+    /// (their memory written) now, with room for the topology to grow by the fraction
+    /// `headroom`, and room for as many more vertices.
+    pub fn ready_to_crack(topology: &Topology, face_count: usize, headroom: f64) -> Self {
+        let vertex_count = topology.vertex_face_offsets.len().saturating_sub(1);
+        let mut fracture = Self::new(vertex_count, face_count);
+        let more = |len: usize| (len as f64 * headroom).ceil() as usize;
+        fracture.origin.reserve(more(vertex_count));
+        fracture.broken.reserve(more(face_count));
+        fracture.spare = TopologySpare::for_topology(topology, headroom);
+        fracture.before = vec![[u32::MAX; 3]; face_count + more(face_count)];
+        fracture.before.clear();
+        fracture
     }
 
     pub fn memory_bytes(&self) -> usize {
-        self.broken.capacity() + self.origin.capacity() * 4
+        self.broken.capacity() + self.origin.capacity() * 4 + self.spare.memory_bytes() + self.before.capacity() * 12
     }
 
     /// Appends a vertex at `x` with velocity `v` and `mass`, split from `from` (pinned if `from`

@@ -25,7 +25,7 @@ pub use ply::{VertexScalar, save_ply};
 pub use report::{MeshReport, first_degenerate_triangle, require_closed_oriented_solid};
 #[cfg(feature = "body")]
 pub(crate) use topology::NO_FACE;
-pub use topology::Topology;
 #[cfg(all(test, feature = "body"))]
 pub(crate) use topology::torus_grid;
+pub use topology::{Topology, TopologySpare};
 pub use tri_mesh::TriMesh;

@@ -303,24 +303,37 @@ impl Topology {
     }
 
     fn build_components(&mut self, triangles: &[[u32; 3]], vertex_count: usize) {
-        let mut parent: Vec<u32> = (0..vertex_count as u32).collect();
+        self.build_components_in(triangles, vertex_count, &mut Vec::new(), &mut Vec::new());
+    }
+
+    /// [`Topology::build_components`] with its per-vertex scratch in `parent` and `label`
+    /// (cleared and refilled: an update passes buffers it keeps) and the face components written
+    /// into the existing buffer.
+    pub(crate) fn build_components_in(
+        &mut self,
+        triangles: &[[u32; 3]],
+        vertex_count: usize,
+        parent: &mut Vec<u32>,
+        label: &mut Vec<u32>,
+    ) {
+        parent.clear();
+        parent.extend(0..vertex_count as u32);
         for t in triangles {
-            union(&mut parent, t[0], t[1]);
-            union(&mut parent, t[1], t[2]);
+            union(parent, t[0], t[1]);
+            union(parent, t[1], t[2]);
         }
-        let mut label = vec![u32::MAX; vertex_count];
+        label.clear();
+        label.resize(vertex_count, u32::MAX);
         let mut next = 0u32;
-        self.face_components = triangles
-            .iter()
-            .map(|t| {
-                let root = find(&mut parent, t[0]) as usize;
-                if label[root] == u32::MAX {
-                    label[root] = next;
-                    next += 1;
-                }
-                label[root]
-            })
-            .collect();
+        self.face_components.clear();
+        self.face_components.extend(triangles.iter().map(|t| {
+            let root = find(parent, t[0]) as usize;
+            if label[root] == u32::MAX {
+                label[root] = next;
+                next += 1;
+            }
+            label[root]
+        }));
         self.component_count = next as usize;
     }
 
@@ -351,6 +364,7 @@ impl Topology {
 
 #[path = "topology_update.rs"]
 mod update;
+pub use update::TopologySpare;
 
 #[cfg(test)]
 #[path = "topology_reference.rs"]
@@ -541,6 +555,12 @@ mod tests {
         for case in 0..300 {
             let (mut triangles, mut vertices) = random_mesh(&mut rng, case);
             let mut topology = Topology::build(&triangles, vertices as usize);
+            // Every other case updates through buffers it keeps, as the fracture does (each
+            // update swaps them with the topology's own: stale contents must never leak).
+            let mut spare = (case % 2 == 0).then(|| {
+                topology.reserve_headroom(0.1);
+                TopologySpare::for_topology(&topology, 0.1)
+            });
             for round in 0..4 {
                 let old = triangles.clone();
                 match rng.below(4) {
@@ -561,7 +581,10 @@ mod tests {
                     2 => vertices += rng.below(3), // only new (unused) vertices
                     _ => split_some_fans(&mut rng, &topology, &mut triangles, &mut vertices),
                 }
-                topology.update(&old, &triangles, vertices as usize);
+                match spare.as_mut() {
+                    Some(spare) => topology.update_with(&old, &triangles, vertices as usize, spare),
+                    None => topology.update(&old, &triangles, vertices as usize),
+                }
                 let built = Topology::build(&triangles, vertices as usize);
                 assert_same(&topology, &built, &format!("case {case}, round {round}"));
             }

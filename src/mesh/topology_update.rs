@@ -46,13 +46,103 @@ fn search_from<T: Ord>(slice: &[T], key: &T) -> Result<usize, usize> {
     }
 }
 
+/// The buffers that [`Topology::update_with`] builds a topology's largest arrays in before it
+/// swaps them with the topology's own (which become the spare of the next update), and the
+/// scratch of an update.
+///
+/// Why: arrays allocated anew at every update cost more in first-touch page faults than the
+/// update's work. On the issue-5 balloon's first cracking step (276 springs,
+/// benches/body_balloon.rs) the update made 231 page faults (0.9 MB of new arrays) and took
+/// 2.1-2.4 ms; 720 KB allocated and written in the same place took 0.4-0.6 ms by itself. Made by
+/// [`TopologySpare::for_topology`], the buffers' memory is written when the body is made, not in
+/// the step that cracks.
+#[derive(Debug, Default)]
+pub struct TopologySpare {
+    edges: Vec<[u32; 2]>,
+    edge_faces: Vec<[u32; 2]>,
+    edge_face_count: Vec<u32>,
+    vertex_face_offsets: Vec<u32>,
+    vertex_faces: Vec<u32>,
+    /// Scratch: old edge -> new edge, and the components' union-find and labels.
+    index: Vec<u32>,
+    parent: Vec<u32>,
+    label: Vec<u32>,
+}
+
+/// An empty vector with room for `len` elements whose memory has been written (so that filling
+/// it later makes no page faults).
+fn touched<T: Copy + Default>(len: usize) -> Vec<T> {
+    let mut v = Vec::with_capacity(len);
+    // `resize` writes each element; `vec![0; len]` would not touch fresh pages (calloc).
+    v.resize(len, T::default());
+    v.clear();
+    v
+}
+
+impl TopologySpare {
+    /// Spare buffers for updates of `topology` that grow it by up to the fraction `headroom`,
+    /// their memory written now.
+    pub fn for_topology(topology: &Topology, headroom: f64) -> Self {
+        let grow = |len: usize| len + (len as f64 * headroom).ceil() as usize;
+        let edges = grow(topology.edges.len());
+        let vertices = grow(topology.vertex_face_offsets.len());
+        Self {
+            edges: touched(edges),
+            edge_faces: touched(edges),
+            edge_face_count: touched(edges),
+            vertex_face_offsets: touched(vertices),
+            vertex_faces: touched(grow(topology.vertex_faces.len())),
+            index: touched(edges),
+            parent: touched(vertices),
+            label: touched(vertices),
+        }
+    }
+
+    /// Bytes held.
+    pub fn memory_bytes(&self) -> usize {
+        (self.edges.capacity() + self.edge_faces.capacity()) * 8
+            + (self.edge_face_count.capacity()
+                + self.vertex_face_offsets.capacity()
+                + self.vertex_faces.capacity()
+                + self.index.capacity()
+                + self.parent.capacity()
+                + self.label.capacity())
+                * 4
+    }
+}
+
 impl Topology {
+    /// Room for the arrays an update rebuilds to grow by the fraction `headroom` without
+    /// moving (see [`TopologySpare`]).
+    pub fn reserve_headroom(&mut self, headroom: f64) {
+        let more = |len: usize| (len as f64 * headroom).ceil() as usize;
+        self.edges.reserve(more(self.edges.len()));
+        self.edge_faces.reserve(more(self.edge_faces.len()));
+        self.edge_face_count.reserve(more(self.edge_face_count.len()));
+        self.vertex_face_offsets.reserve(more(self.vertex_face_offsets.len()));
+        self.vertex_faces.reserve(more(self.vertex_faces.len()));
+        self.face_edges.reserve(more(self.face_edges.len()));
+        self.face_components.reserve(more(self.face_components.len()));
+    }
+
     /// Updates the topology of `old_triangles` (which it describes) to `triangles`: the same
     /// faces, some with other corners, possibly more faces appended, over `vertex_count`
     /// vertices (no fewer than before). The result is identical to `Topology::build(triangles,
     /// vertex_count)`; the work grows with the number of changed faces, apart from a few linear
     /// passes (renumbering the face edges, the boundary loops and the components).
     pub fn update(&mut self, old_triangles: &[[u32; 3]], triangles: &[[u32; 3]], vertex_count: usize) {
+        self.update_with(old_triangles, triangles, vertex_count, &mut TopologySpare::default());
+    }
+
+    /// [`Topology::update`] building into the buffers of `spare`, which gets the topology's old
+    /// ones back.
+    pub fn update_with(
+        &mut self,
+        old_triangles: &[[u32; 3]],
+        triangles: &[[u32; 3]],
+        vertex_count: usize,
+        spare: &mut TopologySpare,
+    ) {
         let old_vertex_count = self.vertex_face_offsets.len().saturating_sub(1);
         if triangles.len() < old_triangles.len()
             || self.face_edges.len() != old_triangles.len()
@@ -68,7 +158,7 @@ impl Topology {
             .map(|f| f as u32)
             .collect();
         let old_corners = |f: u32| (f as usize) < old_face_count;
-        let touched = self.update_vertex_faces(old_triangles, triangles, vertex_count, &changed);
+        let touched = self.update_vertex_faces(old_triangles, triangles, vertex_count, &changed, spare);
 
         // Edges whose faces may have changed: every side of a changed face, before and after.
         let mut keys: Vec<[u32; 2]> = Vec::new();
@@ -113,10 +203,18 @@ impl Topology {
         // (u32::MAX for a regrouped or vanished one).
         let old_edge_count = self.edges.len();
         let capacity = old_edge_count + groups.len();
-        let mut index = vec![u32::MAX; old_edge_count];
-        let mut edges = Vec::with_capacity(capacity);
-        let mut edge_faces = Vec::with_capacity(capacity);
-        let mut edge_face_count = Vec::with_capacity(capacity);
+        let mut index = std::mem::take(&mut spare.index);
+        index.clear();
+        index.resize(old_edge_count, u32::MAX);
+        let mut edges = std::mem::take(&mut spare.edges);
+        let mut edge_faces = std::mem::take(&mut spare.edge_faces);
+        let mut edge_face_count = std::mem::take(&mut spare.edge_face_count);
+        edges.clear();
+        edge_faces.clear();
+        edge_face_count.clear();
+        edges.reserve(capacity);
+        edge_faces.reserve(capacity);
+        edge_face_count.reserve(capacity);
         let mut group_index = Vec::with_capacity(groups.len());
         let mut inconsistent = Vec::new();
         let mut copied = 0; // old edges before this are placed
@@ -149,12 +247,9 @@ impl Topology {
         }
         inconsistent.extend(self.inconsistent_edges.iter().map(|&e| index[e as usize]).filter(|&e| e != u32::MAX));
         inconsistent.sort_unstable();
-        edges.shrink_to_fit();
-        edge_faces.shrink_to_fit();
-        edge_face_count.shrink_to_fit();
-        self.edges = edges;
-        self.edge_faces = edge_faces;
-        self.edge_face_count = edge_face_count;
+        spare.edges = std::mem::replace(&mut self.edges, edges);
+        spare.edge_faces = std::mem::replace(&mut self.edge_faces, edge_faces);
+        spare.edge_face_count = std::mem::replace(&mut self.edge_face_count, edge_face_count);
         self.inconsistent_edges = inconsistent;
 
         // Face edges: renumber, then the regrouped edges' half-edges (all sides of the changed
@@ -173,6 +268,7 @@ impl Topology {
                 self.face_edges[g as usize][s as usize] = new;
             }
         }
+        spare.index = index;
 
         // Fans change only at the ends of the regrouped edges and where the faces changed.
         let mut again: Vec<u32> = keys.iter().flatten().copied().chain(touched).collect();
@@ -190,7 +286,7 @@ impl Topology {
 
         self.boundary_loops = Vec::new();
         self.build_boundary_loops(triangles);
-        self.build_components(triangles, vertex_count);
+        self.build_components_in(triangles, vertex_count, &mut spare.parent, &mut spare.label);
     }
 
     /// Updates the faces around each vertex for the faces `changed`; returns the vertices whose
@@ -201,6 +297,7 @@ impl Topology {
         triangles: &[[u32; 3]],
         vertex_count: usize,
         changed: &[u32],
+        spare: &mut TopologySpare,
     ) -> Vec<u32> {
         // (vertex, face, added): faces that left or joined a vertex, sorted.
         let mut moves: Vec<(u32, u32, bool)> = Vec::new();
@@ -214,11 +311,14 @@ impl Topology {
         }
         moves.sort_unstable();
         let old_vertex_count = self.vertex_face_offsets.len() - 1;
-        let old_offsets = std::mem::take(&mut self.vertex_face_offsets);
-        let old_faces = std::mem::take(&mut self.vertex_faces);
+        let (old_offsets, old_faces) = (&self.vertex_face_offsets, &self.vertex_faces);
         let added = moves.iter().filter(|m| m.2).count();
-        let mut offsets = Vec::with_capacity(vertex_count + 1);
-        let mut faces = Vec::with_capacity(old_faces.len() + added);
+        let mut offsets = std::mem::take(&mut spare.vertex_face_offsets);
+        let mut faces = std::mem::take(&mut spare.vertex_faces);
+        offsets.clear();
+        faces.clear();
+        offsets.reserve(vertex_count + 1);
+        faces.reserve(old_faces.len() + added);
         let old_range = |v: usize| {
             if v < old_vertex_count { old_offsets[v] as usize..old_offsets[v + 1] as usize } else { 0..0 }
         };
@@ -260,15 +360,40 @@ impl Topology {
         }
         offsets.push(faces.len() as u32);
         self.referenced_vertices = (0..vertex_count).filter(|&v| offsets[v + 1] > offsets[v]).count();
-        self.vertex_face_offsets = offsets;
-        self.vertex_faces = faces;
+        spare.vertex_face_offsets = std::mem::replace(&mut self.vertex_face_offsets, offsets);
+        spare.vertex_faces = std::mem::replace(&mut self.vertex_faces, faces);
         touched
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::search_from;
+    use super::{TopologySpare, search_from};
+    use crate::mesh::{Topology, torus_grid};
+
+    /// An update within the headroom builds into the spare's buffers and hands the topology's
+    /// old ones back: no array is allocated (or moved), so a cracking step makes no page faults
+    /// there. Two updates in a row: the second reuses the first's old buffers.
+    #[test]
+    fn updates_within_the_headroom_reuse_the_spare_buffers() {
+        let triangles = torus_grid(12, 10);
+        let vertices = 120;
+        let mut topology = Topology::build(&triangles, vertices);
+        topology.reserve_headroom(0.125);
+        let mut spare = TopologySpare::for_topology(&topology, 0.125);
+        let mut current = triangles.clone();
+        for round in 0..2u32 {
+            let held = [spare.edges.as_ptr() as usize, spare.vertex_faces.as_ptr() as usize];
+            let own = [topology.edges.as_ptr() as usize, topology.vertex_faces.as_ptr() as usize];
+            // Split one vertex's fan: face 0's corner 0 gets a new vertex.
+            let old = current.clone();
+            current[round as usize][0] = (vertices as u32) + round;
+            topology.update_with(&old, &current, vertices + 1 + round as usize, &mut spare);
+            assert_eq!(topology, Topology::build(&current, vertices + 1 + round as usize), "round {round}");
+            assert_eq!([topology.edges.as_ptr() as usize, topology.vertex_faces.as_ptr() as usize], held);
+            assert_eq!([spare.edges.as_ptr() as usize, spare.vertex_faces.as_ptr() as usize], own);
+        }
+    }
 
     /// The same answer as a binary search, found or not, for every key around every position
     /// of sorted slices of 0 to 40 distinct even numbers.
