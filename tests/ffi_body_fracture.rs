@@ -100,6 +100,43 @@ fn over_inflated_ball_cracks_and_deflates() {
     assert!(last.energy_drift.is_finite());
 }
 
+/// A spring cracks exactly when its strain passes `break_strain`: with the limit at the largest
+/// strain a step reports (`max_strain`), nothing cracks; a hair below it, that step cracks. (The
+/// step skips the scan of the springs when its measured largest strain is not over the limit:
+/// this holds only if that measure is the scan's, bit for bit.) For the implicit integrator
+/// (strain from the terms it prepared) and XPBD (measured after the step).
+#[test]
+fn a_spring_cracks_exactly_when_the_largest_strain_passes_the_limit() {
+    let (positions, triangles) = icosphere(2, 1.0);
+    for integrator in [SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, SOFTSHELL_INTEGRATOR_XPBD] {
+        let mut def = softshell_body_def_default();
+        def.integrator = integrator;
+        def.gravity = [0.0; 3];
+        def.gas_amount = 50.0;
+        // Fracture on (a limit no spring reaches) so that every body below steps alike.
+        def.break_strain = 1e6;
+        let probe = body(&positions, &triangles, &def);
+        let strains: Vec<f64> = (0..4).map(|_| step(&probe).max_strain).collect();
+        // The step of the largest strain, and the limits at it and a hair below it.
+        let peak = (0..strains.len()).max_by(|&a, &b| strains[a].total_cmp(&strains[b])).unwrap();
+        let at_limit = SoftshellBodyDef { break_strain: strains[peak] as f32, ..def };
+        let below = SoftshellBodyDef { break_strain: (strains[peak] * (1.0 - 1e-6)) as f32, ..def };
+        assert!(strains[peak] > 0.0, "the gas must stretch the springs: {strains:?}");
+        assert!((below.break_strain as f64) < strains[peak]);
+        assert!(strains[..peak].iter().all(|&e| e <= below.break_strain as f64), "{strains:?}");
+        for (limit, first_crack) in [(at_limit, None), (below, Some(peak))] {
+            let b = body(&positions, &triangles, &limit);
+            let broken: Vec<u64> = (0..=peak).map(|_| step(&b).springs_broken).collect();
+            assert_eq!(
+                broken.iter().position(|&n| n > 0),
+                first_crack,
+                "integrator {integrator}, limit {}: springs broken per step {broken:?}, strains {strains:?}",
+                limit.break_strain
+            );
+        }
+    }
+}
+
 /// Gives every vertex with x > 0 (at its place in `s`) the impulse of a velocity `speed`
 /// away from the origin.
 fn throw_the_positive_x_half_outwards(body: &Body, s: &Snapshot, speed: f32) {
