@@ -811,7 +811,7 @@ impl Body {
             if crack::split_fans(fracture, &topology, &mut self.triangles, &mut self.nodes, &vertices) > 0 {
                 trace_phase("cracks: split", t);
                 let t = Instant::now();
-                topology.update_with(&before, &self.triangles, self.nodes.len(), &mut fracture.spare);
+                topology.update_with(&before, &self.triangles, self.nodes.len(), &mut fracture.spare, Some(&self.pool));
                 trace_phase("cracks: topology update", t);
             }
             fracture.before = before;
@@ -829,7 +829,7 @@ impl Body {
                 }
             }
             if released > 0 {
-                topology.update_with(&before, &self.triangles, self.nodes.len(), &mut fracture.spare);
+                topology.update_with(&before, &self.triangles, self.nodes.len(), &mut fracture.spare, Some(&self.pool));
             }
             fracture.before = before;
         }

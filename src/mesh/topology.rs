@@ -59,6 +59,37 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
     }
 }
 
+/// The connected component of each face of `triangles` (faces sharing a vertex are connected),
+/// numbered from 0 in order of first face, written into `out`; returns the count. `parent` and
+/// `label` are per-vertex scratch (cleared and refilled: an update passes buffers it keeps).
+pub(crate) fn components_into(
+    triangles: &[[u32; 3]],
+    vertex_count: usize,
+    parent: &mut Vec<u32>,
+    label: &mut Vec<u32>,
+    out: &mut Vec<u32>,
+) -> usize {
+    parent.clear();
+    parent.extend(0..vertex_count as u32);
+    for t in triangles {
+        union(parent, t[0], t[1]);
+        union(parent, t[1], t[2]);
+    }
+    label.clear();
+    label.resize(vertex_count, u32::MAX);
+    let mut next = 0u32;
+    out.clear();
+    out.extend(triangles.iter().map(|t| {
+        let root = find(parent, t[0]) as usize;
+        if label[root] == u32::MAX {
+            label[root] = next;
+            next += 1;
+        }
+        label[root]
+    }));
+    next as usize
+}
+
 /// Buckets longer than this are sorted with the library sort instead of by insertion.
 const INSERTION_SORT_MAX: usize = 32;
 
@@ -303,38 +334,10 @@ impl Topology {
     }
 
     fn build_components(&mut self, triangles: &[[u32; 3]], vertex_count: usize) {
-        self.build_components_in(triangles, vertex_count, &mut Vec::new(), &mut Vec::new());
-    }
-
-    /// [`Topology::build_components`] with its per-vertex scratch in `parent` and `label`
-    /// (cleared and refilled: an update passes buffers it keeps) and the face components written
-    /// into the existing buffer.
-    pub(crate) fn build_components_in(
-        &mut self,
-        triangles: &[[u32; 3]],
-        vertex_count: usize,
-        parent: &mut Vec<u32>,
-        label: &mut Vec<u32>,
-    ) {
-        parent.clear();
-        parent.extend(0..vertex_count as u32);
-        for t in triangles {
-            union(parent, t[0], t[1]);
-            union(parent, t[1], t[2]);
-        }
-        label.clear();
-        label.resize(vertex_count, u32::MAX);
-        let mut next = 0u32;
-        self.face_components.clear();
-        self.face_components.extend(triangles.iter().map(|t| {
-            let root = find(parent, t[0]) as usize;
-            if label[root] == u32::MAX {
-                label[root] = next;
-                next += 1;
-            }
-            label[root]
-        }));
-        self.component_count = next as usize;
+        let mut components = std::mem::take(&mut self.face_components);
+        self.component_count =
+            components_into(triangles, vertex_count, &mut Vec::new(), &mut Vec::new(), &mut components);
+        self.face_components = components;
     }
 
     /// Number of edges used by exactly one face.
@@ -557,6 +560,8 @@ mod tests {
             let mut topology = Topology::build(&triangles, vertices as usize);
             // Every other case updates through buffers it keeps, as the fracture does (each
             // update swaps them with the topology's own: stale contents must never leak).
+            // ... half of those with the components found on another thread.
+            let pool = (case % 4 == 0).then(|| crate::parallel::WorkerPool::new(2).unwrap());
             let mut spare = (case % 2 == 0).then(|| {
                 topology.reserve_headroom(0.1);
                 TopologySpare::for_topology(&topology, 0.1)
@@ -582,7 +587,7 @@ mod tests {
                     _ => split_some_fans(&mut rng, &topology, &mut triangles, &mut vertices),
                 }
                 match spare.as_mut() {
-                    Some(spare) => topology.update_with(&old, &triangles, vertices as usize, spare),
+                    Some(spare) => topology.update_with(&old, &triangles, vertices as usize, spare, pool.as_ref()),
                     None => topology.update(&old, &triangles, vertices as usize),
                 }
                 let built = Topology::build(&triangles, vertices as usize);
