@@ -658,7 +658,9 @@ size_t softshell_body_fragment_count(const struct SoftshellBody *body);
 
 // Heap bytes held by the body (positions, springs, gas and fracture bookkeeping, scratch);
 // nothing is held for gas without gas, nor for fracture while both break limits are 0 and no
-// edge was broken by hand. 0 for NULL.
+// edge was broken by hand. A body with a break limit holds its fracture buffers from the start,
+// with room for an eighth more vertices, edges and faces, so that a step that cracks within
+// that room allocates no large array. 0 for NULL.
 //
 // # Safety
 // `body` must be NULL or a live body.
