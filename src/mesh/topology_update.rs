@@ -396,8 +396,8 @@ impl Topology {
 
 #[cfg(test)]
 mod tests {
+    use super::super::{Topology, torus_grid};
     use super::{TopologySpare, search_from};
-    use crate::mesh::{Topology, torus_grid};
 
     /// An update within the headroom builds into the spare's buffers and hands the topology's
     /// old ones back: no array is allocated (or moved), so a cracking step makes no page faults
