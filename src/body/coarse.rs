@@ -249,7 +249,11 @@ impl CoarseSpace {
         self.members = members;
     }
 
-    /// A topology change appended vertices: each joins the aggregate of its `origin`.
+    /// A topology change appended vertices: each joins the aggregate of its `origin`. (Making
+    /// the coarse level again for the cracked surface instead did worse on the issue-5 balloon's
+    /// burst, benches/body_balloon.rs: 47, 87 and 100 CG iterations in the three storm steps
+    /// after the first crack, against 49, 54 and 66 extended, and 65, 56 and 59 without a coarse
+    /// level at all.)
     pub fn extend(&mut self, origin: &[u32]) {
         let known = self.aggregate.len();
         for &from in origin.iter().skip(known) {
