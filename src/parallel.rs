@@ -374,6 +374,32 @@ mod tests {
         assert!(WorkerPool::new(1000).is_err());
     }
 
+    /// `join` runs both closures (each writing its own buffer) and returns both results, with
+    /// one thread or several, and a panic in either comes back to the caller.
+    #[test]
+    fn join_runs_both_and_returns_both_results() {
+        for threads in [1, 2] {
+            let pool = WorkerPool::new(threads).unwrap();
+            let (mut left, mut right) = (vec![0u32; 1000], vec![0u32; 1000]);
+            let (a, b) = pool.join(
+                || {
+                    left.iter_mut().enumerate().for_each(|(i, x)| *x = i as u32);
+                    left.iter().sum::<u32>()
+                },
+                || {
+                    right.iter_mut().enumerate().for_each(|(i, x)| *x = 2 * i as u32);
+                    "right"
+                },
+            );
+            assert_eq!((a, b), (499_500, "right"), "{threads} threads");
+            assert_eq!(right[999], 1998);
+            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                pool.join(|| 1, || -> u32 { panic!("second") })
+            }));
+            assert!(result.is_err(), "{threads} threads");
+        }
+    }
+
     #[test]
     fn worker_panics_come_back_to_the_caller() {
         let pool = WorkerPool::new(2).unwrap();
