@@ -104,13 +104,22 @@ fn over_inflated_ball_cracks_and_deflates() {
 /// strain a step reports (`max_strain`), nothing cracks; a hair below it, that step cracks. (The
 /// step skips the scan of the springs when its measured largest strain is not over the limit:
 /// this holds only if that measure is the scan's, bit for bit.) For the implicit integrator
-/// (strain from the terms it prepared) and XPBD (measured after the step).
+/// (strain from the terms it prepared), XPBD and symplectic Euler (measured after the step), with
+/// one substep and several.
 #[test]
 fn a_spring_cracks_exactly_when_the_largest_strain_passes_the_limit() {
     let (positions, triangles) = icosphere(2, 1.0);
-    for integrator in [SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, SOFTSHELL_INTEGRATOR_XPBD] {
+    let cases = [
+        (SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1),
+        (SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 3),
+        (SOFTSHELL_INTEGRATOR_XPBD, 1),
+        (SOFTSHELL_INTEGRATOR_XPBD, 4),
+        (SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, 40),
+    ];
+    for (integrator, substeps) in cases {
         let mut def = softshell_body_def_default();
         def.integrator = integrator;
+        def.substeps = substeps;
         def.gravity = [0.0; 3];
         def.gas_amount = 50.0;
         // Fracture on (a limit no spring reaches) so that every body below steps alike.
@@ -130,7 +139,7 @@ fn a_spring_cracks_exactly_when_the_largest_strain_passes_the_limit() {
             assert_eq!(
                 broken.iter().position(|&n| n > 0),
                 first_crack,
-                "integrator {integrator}, limit {}: springs broken per step {broken:?}, strains {strains:?}",
+                "integrator {integrator}, {substeps} substeps, limit {}: springs broken per step {broken:?}, strains {strains:?}",
                 limit.break_strain
             );
         }

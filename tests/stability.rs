@@ -111,6 +111,33 @@ fn body_blow_up_is_reported_unstable() {
     }
 }
 
+/// A step that failed fails again when retried from the state it was rolled back to (the
+/// explicit integrators' growth rule keeps its reference across the rollback).
+#[test]
+fn a_retried_unstable_explicit_step_fails_again() {
+    use report_util::*;
+    use softshell::ffi::body::*;
+    let (p, t) = unit_obj("sphere.obj", 1.0);
+    // The blow-up of explicit Euler onto the ground at g = 1e4 (section 5 of the report): caught,
+    // then the same step again, from the same state, is caught again.
+    let def = softshell::ffi::SoftshellBodyDef {
+        integrator: SOFTSHELL_INTEGRATOR_EXPLICIT_EULER,
+        gas_amount: 1e-3,
+        spring_stiffness: 10.0,
+        gravity: [0.0, -1e4, 0.0],
+        ground: true,
+        ground_height: -0.5,
+        ..softshell_body_def_default()
+    };
+    let body = Body::new(&p, &t, &def).unwrap();
+    let first = (0..60).find_map(|_| body.step().err()).expect("the blow-up must be caught");
+    assert_eq!(first.0, softshell::ffi::SoftshellStatus::Unstable, "{}", first.1);
+    for _ in 0..2 {
+        let again = body.step().expect_err("a retried unstable step must fail again");
+        assert_eq!(again, first);
+    }
+}
+
 /// Regression test (was a known bug, see report/error_vs_time.md): an anisotropic region with the
 /// default settings on data/eight.obj, collisions off, used to turn the shell inside out (V/V0 < 0)
 /// while every step returned OK. Now the step is rolled back and reported UNSTABLE.

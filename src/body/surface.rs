@@ -62,6 +62,8 @@ pub(crate) struct Fracture {
     /// (whose first-touch page faults cost more than the work).
     pub spare: TopologySpare,
     pub before: Vec<[u32; 3]>,
+    /// The fragment of each face before the change (kept, as `before`).
+    pub face_fragment_before: Vec<u32>,
 }
 
 impl Fracture {
@@ -71,6 +73,7 @@ impl Fracture {
             origin: (0..vertex_count as u32).collect(),
             spare: TopologySpare::default(),
             before: Vec::new(),
+            face_fragment_before: Vec::new(),
         }
     }
 
@@ -86,11 +89,16 @@ impl Fracture {
         fracture.spare = TopologySpare::for_topology(topology, headroom);
         fracture.before = vec![[u32::MAX; 3]; face_count + more(face_count)];
         fracture.before.clear();
+        fracture.face_fragment_before = vec![u32::MAX; face_count + more(face_count)];
+        fracture.face_fragment_before.clear();
         fracture
     }
 
     pub fn memory_bytes(&self) -> usize {
-        self.broken.capacity() + self.origin.capacity() * 4 + self.spare.memory_bytes() + self.before.capacity() * 12
+        self.broken.capacity()
+            + (self.origin.capacity() + self.face_fragment_before.capacity()) * 4
+            + self.spare.memory_bytes()
+            + self.before.capacity() * 12
     }
 
     /// Appends a vertex at `x` with velocity `v` and `mass`, split from `from` (pinned if `from`
