@@ -197,17 +197,22 @@ impl ImplicitScratch {
     /// ones, 6.4 ms of it the coarse factor and about 1,400 page faults the buffers. The same
     /// inputs (the rest positions) as the first substep's, so the same coarse level.
     pub fn prepare(&mut self, model: &Model, x: &[Vec3], h: f32, threads: usize) {
-        let n = x.len();
-        for buffer in [&mut self.rhs, &mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
-            buffer.resize(n, Vec3A::ZERO);
-        }
-        self.inv_diag.resize(n, SymmetricBlock::default());
-        self.couplings.layout(&model.springs.offsets);
+        self.size_buffers(model, x.len());
         self.spring_terms.resize(model.springs.len(), SpringTerms::default());
         if self.coarse_h != h {
             self.coarse = CoarseSpace::new(model, x, h, threads);
             self.coarse_h = h;
         }
+    }
+
+    /// The per-vertex buffers every substep writes and the coupling layout, sized for `n`
+    /// vertices and the springs of `model`.
+    fn size_buffers(&mut self, model: &Model, n: usize) {
+        for buffer in [&mut self.rhs, &mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
+            buffer.resize(n, Vec3A::ZERO);
+        }
+        self.inv_diag.resize(n, SymmetricBlock::default());
+        self.couplings.layout(&model.springs.offsets);
     }
 
     pub fn memory_bytes(&self) -> usize {
@@ -1140,11 +1145,7 @@ pub(crate) fn substep(
     let n = x.len();
     // Set again by the last pass (a substep that does not reach it leaves the step to check).
     s.all_finite = false;
-    for buffer in [&mut s.rhs, &mut s.r, &mut s.z, &mut s.p, &mut s.ap] {
-        buffer.resize(n, Vec3A::ZERO);
-    }
-    s.inv_diag.resize(n, SymmetricBlock::default());
-    s.couplings.layout(&model.springs.offsets);
+    s.size_buffers(model, n);
     // Without wind the assembly adds gravity and the pressure per vertex (two serial passes
     // fewer); with wind the external forces are gathered here first.
     let wind = model.has_wind();
