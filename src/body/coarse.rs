@@ -17,10 +17,24 @@
 //! 15-20 iterations, over the inside of the contact patch (vertices on the ground whose
 //! neighbours all are, sliding outward at about 1 m/s: 44-58% of the residual on 8-17% of the
 //! vertices); with the contacts left to the position correction after the solve, the storm (a
-//! milder one: 441-1,076 springs a step) takes 20-38. Keeping the contact normal out of the
-//! correction of every aggregate that touches the ground (on both sides, so the preconditioner
-//! stays symmetric) made every contact step slower: 15 -> 17, 17 -> 22 and 20 -> 23 iterations
-//! for a ball that holds, 49 -> 53 and 66 -> 72 in the storm.
+//! milder one: 441-1,076 springs a step) takes 20-38.
+//!
+//! Why, from Lanczos estimates (the CG coefficients) and the Ritz vector of the softest mode:
+//! the preconditioned spectrum of a ball that holds spans 0.08-2.8; in the solve after the
+//! first crack its smallest values are 3e-3, 1.7e-2 and 3.9e-2. With this level remade, 98% of
+//! the softest mode lies on 200 vertices of the patch, and 80% on the 212 vertices that the
+//! crack left with two springs, in chains: a face keeps its corners when one of its springs
+//! breaks and no fan splits, so the bars left form linkages that turn without stretching a
+//! spring, resisted by little more than their mass. One-vertex blocks see each bar's full
+//! stiffness and piecewise-constant aggregates cannot turn a bar, so neither level reaches those
+//! motions; a block per chain would. (Remade, this level also takes the largest values to 51
+//! and 264 in the next steps, likely because its scalar matrix has no gas term, which is large
+//! for small closed fragments.)
+//!
+//! Keeping the contact normal out of the correction of every aggregate that touches the ground
+//! (on both sides, so the preconditioner stays symmetric) made every contact step slower:
+//! 15 -> 17, 17 -> 22 and 20 -> 23 iterations for a ball that holds, 49 -> 53 and 66 -> 72 in
+//! the storm.
 
 use glam::{Vec3, Vec3A};
 
