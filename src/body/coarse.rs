@@ -27,9 +27,16 @@
 //! breaks and no fan splits, so the bars left form linkages that turn without stretching a
 //! spring, resisted by little more than their mass. One-vertex blocks see each bar's full
 //! stiffness and piecewise-constant aggregates cannot turn a bar, so neither level reaches those
-//! motions; a block per chain would. (Remade, this level also takes the largest values to 51
-//! and 264 in the next steps, likely because its scalar matrix has no gas term, which is large
-//! for small closed fragments.)
+//! motions. Tried and not kept:
+//! - exact blocks over each chain (a prototype): 49 -> 33 iterations, but a solve asked for
+//!   1e-5 diverged with them, and the storm that followed broke 2,666 and then 15,115 springs,
+//!   where a converged solve without them breaks 1,332, 1,435 and 1,568;
+//! - keeping the spring of a broken edge until the surface opens there (no linkages; a change of
+//!   the fracture model): the storm's solves took 40, 45 and 81 iterations instead of 49, 54 and
+//!   66 (which soft motions remain was not measured).
+//!
+//! Remade, this level also takes the largest values to 51 and 264 in the next steps, likely
+//! because its scalar matrix has no gas term, which is large for small closed fragments.
 //!
 //! Keeping the contact normal out of the correction of every aggregate that touches the ground
 //! (on both sides, so the preconditioner stays symmetric) made every contact step slower:
