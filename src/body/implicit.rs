@@ -1200,7 +1200,16 @@ pub(crate) fn substep(
     // The warm start: the previous substep's Δv (the velocity change varies slowly from step
     // to step), or on the first substep the free-fall guess Δv = h g: either solves the rigid
     // translation, the mode that a Jacobi preconditioner dominated by stiff springs resolves
-    // worst.
+    // worst. Measured on the issue-5 balloon (benches/body_balloon.rs, CG iterations over 600
+    // steps, 3,771 with this start) and not kept:
+    // - the Galerkin combination of the last k Δv (their products with the matrix taken from
+    //   the residuals their solves ended with, so no extra product): 3,330 (k = 2), 3,265
+    //   (k = 3), all of it at rest (the impact and wobble got no better); on its own the zero
+    //   gravity balloon went from 4.3 to 1.2 iterations per step. Its passes over 2k + 2 stored
+    //   vectors cost about what the 0.8 iterations a step it saves do;
+    // - a few CG iterations on the contact patch and two rings around it (which hold 95-100% of
+    //   the first residual during the wobble) before the global solve: 3,482 with 3 of them, 3,497
+    //   with 12, which moved the residual out of the patch (down 3-5x), not away.
     if s.dv.len() != n {
         let g = Vec3A::from(model.settings.gravity * h);
         s.dv.clear();
