@@ -64,7 +64,10 @@ const SPRING_SHARE: f64 = 0.5;
 /// only to 37 and 12 (the coarse matrix then misses too much of the springs' stiffness inside
 /// each aggregate); three passes to 49. Smaller aggregates (leftovers grouped among themselves:
 /// 2,121 of them) save under one iteration per step (7.2 to 6.4 with the contact blocks) and cost
-/// more than that in the coarse solve.
+/// more than that in the coarse solve. In the Morton order the body stores its vertices in
+/// (`vertex_order`) this pass makes 1,167 aggregates (606 KB of factor); visiting the vertices
+/// with a stride instead (3, 17, 101 or 7,919) makes 959-986 (490-520 KB) but takes 7.1-7.3
+/// iterations per step instead of 6.3.
 const PASSES: usize = 1;
 
 pub(crate) struct CoarseSpace {
