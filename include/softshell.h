@@ -20,11 +20,15 @@
 #define SOFTSHELL_ABI_VERSION ((SOFTSHELL_VERSION_MAJOR << 16) | (SOFTSHELL_VERSION_MINOR << 8) | SOFTSHELL_VERSION_PATCH)
 
 
-// Explicit Euler, `x += h v; v += h a` with the old velocity: the paper's integrator. Unstable
-// for stiff springs (`h` above about `2/omega`): such a step returns `SOFTSHELL_STATUS_UNSTABLE`.
+// Explicit Euler, `x += h v; v += h a` with the old velocity: the paper's integrator. Needs
+// spring damping: its springs' modes are stable only while `h < K_d/K_s` (and, where damping
+// dominates, `h < 4/(gamma + sqrt(gamma^2 - 4 omega^2))`, with `omega^2` and `gamma` the springs'
+// stiffness and damping over the lightest vertex's mass); a step that diverges returns
+// `SOFTSHELL_STATUS_UNSTABLE` with that estimate.
 #define SOFTSHELL_INTEGRATOR_EXPLICIT_EULER 0
 
-// Symplectic (semi-implicit) Euler, `v += h a; x += h v`: stable while `h < 2/omega_max`.
+// Symplectic (semi-implicit) Euler, `v += h a; x += h v`: stable while
+// `h^2 omega^2 + 2 h gamma < 4` (`h < 2/omega` without damping; `omega`, `gamma` as above).
 #define SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER 1
 
 // Linearised backward Euler solved by conjugate gradients: stable at any time step, with
@@ -252,7 +256,8 @@ typedef struct SoftshellBodyDef {
   // Gas leak through holes, m/(Pa s): `d(nRT)/dt = -leak_rate * hole_area * pressure`, in
   // [0, 1e6]. Default 0.
   float leak_rate;
-  // A ground plane y = ground_height (normal +y). Default false.
+  // A ground plane y = ground_height (normal +y); free vertices below it when the body is made
+  // start on it. Default false.
   bool ground;
   // Height of the ground plane, m. Default 0.
   float ground_height;
@@ -571,7 +576,9 @@ SoftshellStatus softshell_body_new(const struct SoftshellMesh *mesh,
 void softshell_body_free(struct SoftshellBody *body);
 
 // Adds a solid sphere obstacle (centre `center` float[3], m; `radius` > 0, m): vertices are
-// kept outside it with the def's restitution and friction.
+// kept outside it with the def's restitution and friction. Free vertices inside it when it is
+// added move to its surface at once, their velocity into it removed; the energy drift goes on
+// from where it was (the move is not counted as work).
 // Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius not > 0.
 //
 // # Safety
@@ -582,6 +589,8 @@ SoftshellStatus softshell_body_add_sphere_obstacle(struct SoftshellBody *body,
 
 // Adds a half-space obstacle: the plane through `point` (float[3], m) with `normal` (float[3],
 // any non-zero length, pointing to the free side); vertices are kept on the normal's side.
+// Free vertices behind it when it is added move onto the plane at once, their velocity into it
+// removed; the energy drift goes on from where it was (the move is not counted as work).
 // Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a zero normal.
 //
 // # Safety
@@ -622,7 +631,8 @@ SoftshellStatus softshell_body_break_edge(struct SoftshellBody *body, uint32_t a
 // blocks). Writes what happened into `*out_stats` when it is not NULL.
 //
 // Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a NaN, or energy growing without a
-// source): the state is rolled back to before the step, `*out_stats` is not written, and the
+// source: in one step, or, with the explicit integrators, over many steps beyond what the body
+// was given): the state is rolled back to before the step, `*out_stats` is not written, and the
 // message gives the largest stable time step it estimates.
 //
 // # Safety

@@ -1,5 +1,6 @@
-//! Energies for the error report and the divergence check (SPEC 2.2, 4), and the stable time
-//! step estimate `2/ω_max` with `ω_max² ≈ max_i 2 w_i Σ_{springs at i} K_s` (Gershgorin).
+//! Energies for the error report and the divergence check (SPEC 2.2, 4), and the bound behind
+//! the stable time step estimate (`Body::stable_time_step`): `ω_max² ≈ max_i 2 w_i Σ_{springs at
+//! i} K_s` (Gershgorin, SPEC 2.2), and the same with `K_d` for the damping rate `γ_max`.
 
 use glam::Vec3;
 
@@ -102,12 +103,16 @@ pub(crate) fn momentum(mass: &[f32], v: &[Vec3]) -> glam::DVec3 {
     mass.iter().zip(v).map(|(&m, v)| m as f64 * v.as_dvec3()).sum()
 }
 
-/// Largest angular frequency of the spring network, rad/s (upper bound).
-pub(crate) fn omega_max(springs: &Springs, inv_mass: &[f32], ks: f32) -> f64 {
-    let mut stiffness = vec![0.0f64; inv_mass.len()];
+/// `max_i 2 c_i w_i` over the vertices (`c_i` springs at vertex i, `w_i` its inverse mass): the
+/// Gershgorin bound of the spring network per unit spring constant, so that the largest
+/// eigenvalue of `M⁻¹K` is at most `K_s` times it (SPEC 2.2 `ω_max² ≈ max_i Σ K_s w_i`, with the
+/// factor 2 of a spring's two ends) and that of the damping `M⁻¹C` at most `K_d` times it (the
+/// damping acts along the same springs).
+pub(crate) fn spring_rate_bound(springs: &Springs, inv_mass: &[f32]) -> f64 {
+    let mut count = vec![0u32; inv_mass.len()];
     for &[i, j] in &springs.ends {
-        stiffness[i as usize] += ks as f64;
-        stiffness[j as usize] += ks as f64;
+        count[i as usize] += 1;
+        count[j as usize] += 1;
     }
-    stiffness.iter().zip(inv_mass).map(|(&k, &w)| 2.0 * k * w as f64).fold(0.0, f64::max).sqrt()
+    count.iter().zip(inv_mass).map(|(&c, &w)| 2.0 * c as f64 * w as f64).fold(0.0, f64::max)
 }

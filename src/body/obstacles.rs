@@ -38,6 +38,13 @@ impl Obstacle {
     }
 }
 
+impl Obstacle {
+    /// True when `p` is inside (strictly behind the surface).
+    pub(crate) fn contains(&self, p: Vec3) -> bool {
+        self.distance(p).0 < 0.0
+    }
+}
+
 /// Pushes `x` out of every obstacle it is inside (positions only, for constraint solvers);
 /// returns the normal of the last contact.
 pub(crate) fn project(x: &mut Vec3, obstacles: &[Obstacle]) -> Option<Vec3> {

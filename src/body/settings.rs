@@ -5,9 +5,11 @@ use glam::Vec3;
 /// Time integrator of a soft body (SPEC 2.2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Integrator {
-    /// `x += h v; v += h a` with the old v: the paper's, unstable for stiff springs.
+    /// `x += h v; v += h a` with the old v: the paper's; stable only with spring damping, for
+    /// `h < K_d/K_s` (see `Body::stable_time_step`).
     ExplicitEuler,
-    /// `v += h a; x += h v`: stable for `h < 2/ω_max`, energy-conserving on average.
+    /// `v += h a; x += h v`: stable for `h² ω_max² + 2 h γ_max < 4` (`h < 2/ω_max` without
+    /// damping), energy-conserving on average.
     SymplecticEuler,
     /// Linearised backward Euler solved by matrix-free conjugate gradients: stable at any `h`.
     ImplicitEuler,

@@ -375,3 +375,12 @@ pub fn memory(body: &Body) -> usize {
     // SAFETY: live body.
     unsafe { softshell_body_memory_bytes(body.0) }
 }
+
+/// The `substeps >= N` and the `about X s` (largest stable time step) of an explicit
+/// integrator's UNSTABLE message.
+pub fn unstable_advice(message: &str) -> (u32, f64) {
+    let field = |after: &str| message.split(after).nth(1).and_then(|t| t.split([' ', ')']).next()).map(str::to_owned);
+    let substeps = field("substeps >= ").and_then(|t| t.parse().ok()).unwrap_or_else(|| panic!("no advice: {message}"));
+    let estimate = field("about ").and_then(|t| t.parse().ok()).unwrap_or_else(|| panic!("no estimate: {message}"));
+    (substeps, estimate)
+}
