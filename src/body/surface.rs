@@ -64,6 +64,10 @@ pub(crate) struct Fracture {
     pub before: Vec<[u32; 3]>,
     /// The fragment of each face before the change (kept, as `before`).
     pub face_fragment_before: Vec<u32>,
+    /// Per vertex (as far as it is long), true for the vertices of a released core block and
+    /// the centre of the patch it left: they release no block themselves (see
+    /// `core_block::release`).
+    pub in_core: Vec<bool>,
 }
 
 impl Fracture {
@@ -74,7 +78,22 @@ impl Fracture {
             spare: TopologySpare::default(),
             before: Vec::new(),
             face_fragment_before: Vec::new(),
+            in_core: Vec::new(),
         }
+    }
+
+    /// True when vertex `i` belongs to a released core block or is the centre of a patch one
+    /// left.
+    pub fn is_in_core(&self, i: usize) -> bool {
+        self.in_core.get(i).copied().unwrap_or(false)
+    }
+
+    /// Marks vertex `i` as [`Fracture::is_in_core`].
+    pub fn mark_in_core(&mut self, i: usize) {
+        if self.in_core.len() <= i {
+            self.in_core.resize(i + 1, false);
+        }
+        self.in_core[i] = true;
     }
 
     /// [`Fracture::new`] for a body of `topology` that will crack: its spare buffers made
@@ -99,6 +118,7 @@ impl Fracture {
             + (self.origin.capacity() + self.face_fragment_before.capacity()) * 4
             + self.spare.memory_bytes()
             + self.before.capacity() * 12
+            + self.in_core.capacity()
     }
 
     /// Appends a vertex at `x` with velocity `v` and `mass`, split from `from` (pinned if `from`

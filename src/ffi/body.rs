@@ -70,8 +70,9 @@ pub struct SoftshellBodyDef {
     /// Spring strain `(length - rest)/rest` above which a spring breaks and the surface cracks,
     /// in [0, 1e6]. 0 (default) = never.
     pub break_strain: f32,
-    /// Net force on a vertex, N, above which it is cut out as a core block, in [0, 1e12].
-    /// 0 (default) = never.
+    /// Net force on a vertex, N, above which it is cut out as a core block, in [0, 1e12]: each
+    /// vertex at most once, and the vertices of a released block (and the centre of the patch it
+    /// leaves) never. 0 (default) = never.
     pub break_force: f32,
     /// Gas leak through holes, m/(Pa s): `d(nRT)/dt = -leak_rate * hole_area * pressure`, in
     /// [0, 1e6]. Default 0.
