@@ -289,9 +289,10 @@ typedef struct SoftshellBodyStats {
   double pressure;
   // Kinetic energy, J.
   double kinetic_energy;
-  // Energy error: (kinetic + spring + gas + gravitational energy) minus its initial value and
-  // the work of wind and impulses, J. Damping, contacts and leaks make it negative; a growing
-  // positive value means the integrator is adding energy.
+  // Energy error: (kinetic + spring + gas + gravitational energy) minus its initial value, the
+  // work of wind and impulses, and the gas energy that leaks took away, J. Damping and
+  // contacts make it negative; a growing positive value means the integrator is adding
+  // energy.
   double energy_drift;
   // Springs broken during this step.
   uint64_t springs_broken;

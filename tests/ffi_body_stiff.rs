@@ -258,8 +258,9 @@ fn a_slow_explicit_blow_up_is_reported_unstable() {
 
 /// Explicit Euler gains `m (h g)² / 2` per step from gravity alone (its positions lag its
 /// velocities): a body falling from rest, one step per frame at half its stable step, is not
-/// called UNSTABLE for it (its first step has no released gravitational energy to measure the
-/// gain against: the drift rule fails a step only the second time in a row).
+/// called UNSTABLE for it. Its first step has made energy before gravity has released any, its
+/// second as much as gravity released: the drift rule fails a step only the second time in a
+/// row, and allows twice gravity's gain per substep (fails without either).
 #[test]
 fn explicit_euler_falls_from_rest_without_being_called_unstable() {
     let (p, t) = icosphere(2, 0.5);

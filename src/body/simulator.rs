@@ -132,9 +132,15 @@ pub struct Body {
     /// and above the rounding of the energies (see [`EXCESS_GROWTH_RATIO`]); 0 when it did not,
     /// and after anything changed the state between steps (an impulse, a pin, a crack).
     last_excess_growth: f64,
-    /// The most kinetic plus spring energy the body has held at the end of a step or when it
-    /// was made, J: the reference of [`EXPLICIT_DRIFT_LIMIT`].
-    most_mechanical: f64,
+    /// The kinetic plus spring energy the body was given other than by external work: what it
+    /// held when it was made, and what moving vertices out of an added obstacle gave it, J
+    /// (part of the reference of [`EXPLICIT_DRIFT_LIMIT`]).
+    given_mechanical: f64,
+    /// The change of the gas energy that leaks made, J: the energy the escaping gas took, kept
+    /// out of the drift like external work. (The gas energy is `-nRT ln V`, so its sign
+    /// follows the unit of volume: counted as drift, a leak looked like energy made in a ball
+    /// over 1 m^3 and hid energy made in a smaller one.)
+    gas_leaked: f64,
     /// Whether the last step's energy drift was over [`EXPLICIT_DRIFT_LIMIT`] (a step is
     /// UNSTABLE for it only the second time in a row).
     drift_over: bool,
@@ -164,8 +170,9 @@ const EXCESS_GROWTH_RATIO: f64 = 4.0;
 
 /// An explicit Euler step is UNSTABLE when the energy made since the start without a source
 /// (the energy drift: total energy minus the initial energy and the external work) exceeds this
-/// many times what the body was given: the most kinetic plus spring energy it has held, what
-/// gravity and the gas released since it was made, and the external work.
+/// many times what the body was given: its kinetic plus spring energy at the start, what
+/// gravity and the gas released since, and the external work. (Not the most it has held, which
+/// grows with the energy an instability makes: a slow one never passed that test.)
 /// Stable, explicit Euler loses energy to the damping (its small gain under a constant force,
 /// `(hF)²/2m` a step, stays a vanishing fraction of what the force gave); unstable, it makes
 /// energy in every spring mode, by a few percent a step just past the limit: a review found a
@@ -309,7 +316,8 @@ impl Body {
             energy_start: 0.0,
             energy_now: None,
             last_excess_growth: 0.0,
-            most_mechanical: 0.0,
+            given_mechanical: 0.0,
+            gas_leaked: 0.0,
             drift_over: false,
             start_gravity: 0.0,
             start_gas: 0.0,
@@ -320,7 +328,7 @@ impl Body {
         body.move_outside(&obstacles);
         let energies = body.energy_parts();
         body.energy_start = energies.total();
-        body.most_mechanical = energies.kinetic + energies.spring;
+        body.given_mechanical = energies.kinetic + energies.spring;
         (body.start_gravity, body.start_gas) = (energies.gravity, energies.gas);
         body.last = body.stats(0, 0, 0.0, 0, energies);
         // The implicit integrator's setup (coarse level, buffers) now rather than in the first
@@ -430,11 +438,11 @@ impl Body {
             Some(energies) => energies,
             None => self.energy_parts(),
         };
-        let drift = before.total() - self.energy_start - self.external_work;
+        let drift = self.drift_of(before.total());
         self.move_outside(&[obstacle]);
         let after = self.energy_parts();
-        self.energy_start = after.total() - self.external_work - drift;
-        self.most_mechanical = self.most_mechanical.max(after.kinetic + after.spring);
+        self.rebase(after.total(), drift);
+        self.given_mechanical += (after.kinetic + after.spring - before.kinetic - before.spring).max(0.0);
         // The state changed between steps: the next step measures it again.
         self.energy_now = None;
     }
@@ -520,6 +528,18 @@ impl Body {
             .sum()
     }
 
+    /// The energy drift of a state of total energy `total`: what it holds beyond the energy at
+    /// the start, the external work and the leaks' change of the gas energy.
+    fn drift_of(&self, total: f64) -> f64 {
+        total - self.energy_start - self.external_work - self.gas_leaked
+    }
+
+    /// Moves the energy reference so that a state of total energy `total` (after a change that
+    /// is not a step: a crack, a cut, an obstacle's push) has the drift `drift`.
+    fn rebase(&mut self, total: f64, drift: f64) {
+        self.energy_start = total - self.external_work - self.gas_leaked - drift;
+    }
+
     /// The energies of the current state (measures the gas at the current positions).
     fn energy_parts(&mut self) -> EnergyParts {
         let x = &self.nodes.x;
@@ -558,9 +578,10 @@ impl Body {
     ///   damping dominates (`γ² > 4 ω²`), `h < 4 / (γ + √(γ² - 4 ω²))`; 0 without damping (its
     ///   springs' modes then grow at any step).
     ///
-    /// Modes that the springs' damping does not reach (their sideways tension, the gas) are left
-    /// out: explicit Euler makes them grow slowly at any step (the step's energy check catches
-    /// it), symplectic Euler keeps them within the bound above.
+    /// Modes that the springs' damping does not reach (their sideways tension, the gas's
+    /// breathing) are left out: explicit Euler makes them grow slowly at any step, until the
+    /// energy they made exceeds what the body was given ([`EXPLICIT_DRIFT_LIMIT`]); symplectic
+    /// Euler keeps them stable while `h ω < 2` in them.
     pub fn stable_time_step(&self) -> f64 {
         let rate = energy::spring_rate_bound(&self.springs, &self.nodes.inv_mass);
         let (ks, kd) = (self.settings.spring_stiffness as f64, self.settings.spring_damping as f64);
@@ -608,15 +629,25 @@ impl Body {
             let substeps = (self.settings.time_step as f64 / (0.9 * h_max)).ceil().max(1.0);
             let from = if self.settings.integrator == Integrator::ExplicitEuler {
                 "explicit Euler needs h below K_d/K_s, and below 4/(gamma + sqrt(gamma^2 - 4 omega^2)) where damping \
-                 dominates"
+                 dominates; modes the springs do not damp (the gas, sideways tension) grow at any h"
             } else {
-                "4/(gamma + sqrt(gamma^2 + 4 omega^2)) with omega^2 and gamma the springs' stiffness and damping over \
-                 the lightest vertex's mass"
+                "4/(gamma + sqrt(gamma^2 + 4 omega^2)) with omega^2 and gamma bounds of the springs' stiffness and \
+                 damping per unit mass"
             };
-            format!(
-                "the largest stable time step is about {h_max:.3e} s ({from}; this step used h = {h:.3e} s): use \
-                 substeps >= {substeps} or SOFTSHELL_INTEGRATOR_IMPLICIT_EULER"
-            )
+            if h < h_max {
+                // Under the springs' limit already: what grew is a mode they do not damp.
+                format!(
+                    "the largest stable time step of the springs is about {h_max:.3e} s ({from}) and this step used \
+                     h = {h:.3e} s, below it: the energy grew in a mode the springs' damping does not reach (the \
+                     gas, sideways tension); use SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER or \
+                     SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, or more spring_damping"
+                )
+            } else {
+                format!(
+                    "the largest stable time step is about {h_max:.3e} s ({from}; this step used h = {h:.3e} s): use \
+                     substeps >= {substeps} or SOFTSHELL_INTEGRATOR_IMPLICIT_EULER"
+                )
+            }
         } else {
             "reduce time_step or use SOFTSHELL_INTEGRATOR_IMPLICIT_EULER".to_owned()
         };
@@ -765,15 +796,31 @@ impl Body {
                 } else {
                     SYMPLECTIC_DRIFT_LIMIT
                 };
-                let drift = after.total() - self.energy_start - self.external_work - work;
-                let held = self.most_mechanical.max(before.kinetic + before.spring);
+                let drift = self.drift_of(after.total()) - work;
+                let given = self.given_mechanical;
                 // What gravity and the gas have given since the body was made (a falling body's
                 // kinetic energy comes from there; explicit Euler gains `m g² h² / 2` of it a
                 // step, a constant force's error).
-                let released = (self.start_gravity - after.gravity).max(0.0) + (self.start_gas - after.gas).max(0.0);
-                let reference = held + released + self.external_work.abs() + work.abs();
+                let released = (self.start_gravity - after.gravity).max(0.0)
+                    + (self.start_gas + self.gas_leaked - after.gas).max(0.0);
+                let reference = given + released + self.external_work.abs() + work.abs();
                 let noise = EXCESS_NOISE * (after.kinetic + after.spring + after.gravity.abs() + after.gas.abs());
-                let over = drift > limit * reference + noise;
+                // Explicit Euler gains `m (h g)² / 2` a substep from gravity alone (its positions
+                // lag its velocities): a body falling from rest makes as much by its second step
+                // as gravity has released, so twice that per substep of this step is allowed
+                // (measured only when it may matter).
+                let constant_force = || {
+                    let free_mass: f64 = self
+                        .nodes
+                        .mass
+                        .iter()
+                        .zip(&self.nodes.inv_mass)
+                        .filter(|(_, w)| **w > 0.0)
+                        .map(|(m, _)| *m as f64)
+                        .sum();
+                    substeps as f64 * free_mass * (h as f64 * self.settings.gravity.length() as f64).powi(2)
+                };
+                let over = drift > limit * reference + noise && drift > limit * (reference + constant_force()) + noise;
                 // Two steps in a row: explicit Euler's step from rest under an unbalanced force
                 // (gravity, the gas of a body not yet inflated) gains `(hF)²/2m` before its
                 // positions have moved, so before gravity or the gas has released anything to
@@ -782,8 +829,8 @@ impl Body {
                 if diverged.is_none() && over && was_over {
                     diverged = Some(format!(
                         "the energy made without a source reached {drift:.3e} J, more than {limit} times what the body \
-                         was given ({reference:.3e} J: the most kinetic + spring energy it has held, {held:.3e} J, what \
-                         gravity and the gas released, and the external work)"
+                         was given ({reference:.3e} J: its kinetic + spring energy at the start, {given:.3e} J, what \
+                         gravity and the gas released since, and the external work)"
                     ));
                 }
             }
@@ -803,16 +850,17 @@ impl Body {
             return Err(self.unstable(what));
         }
         self.external_work += work;
-        self.most_mechanical = self.most_mechanical.max(after.kinetic + after.spring);
         self.steps += 1;
         self.time += self.settings.time_step as f64;
         // `after` measured the gas at these positions; only the leak changes its energy.
         if let Some(gas) = self.gas.as_mut() {
             gas.leak(self.settings.time_step as f64, self.settings.leak_rate as f64);
-            after.gas = gas.energy();
+            let leaked = gas.energy() - after.gas;
+            after.gas += leaked;
+            self.gas_leaked += leaked;
         }
         let generation = self.generation;
-        let drift = after.total() - self.energy_start - self.external_work;
+        let drift = self.drift_of(after.total());
         let fracture_started = Instant::now();
         let (broken, cores) = self.fracture_phase(after.max_strain);
         if self.generation != generation {
@@ -821,7 +869,7 @@ impl Body {
             // from where it was.
             let t = Instant::now();
             after = self.energy_parts();
-            self.energy_start = after.total() - self.external_work - drift;
+            self.rebase(after.total(), drift);
             trace_phase("energy after", t);
             trace_phase("WHOLE fracture phase", fracture_started);
         }
@@ -965,9 +1013,6 @@ impl Body {
     /// that changed), never built again from scratch.
     fn change_topology(&mut self, pairs: &[[u32; 2]], cores: &[u32]) -> u64 {
         let n = self.nodes.len();
-        if let Scratch::Implicit(s) = &mut self.scratch {
-            s.forget_prepared();
-        }
         let t = Instant::now();
         let fracture = self.fracture.get_or_insert_with(|| Fracture::new(n, self.triangles.len()));
         // The fragments before the change, in a buffer the fracture keeps.
@@ -1022,6 +1067,19 @@ impl Body {
             topology == Topology::build(&self.triangles, self.nodes.len()),
             "the updated topology differs from a new build"
         );
+        if pairs.is_empty() && released == 0 {
+            // Only core candidates, none of them released (a fan a crack had opened): nothing
+            // changed, so no rebuild and no new generation (a review saw the generation go up
+            // every step, each a full rebuild, for a vertex that could never be released).
+            self.topology = Some(topology);
+            if let Some(fracture) = self.fracture.as_mut() {
+                fracture.face_fragment_before = old_face_fragment;
+            }
+            return 0;
+        }
+        if let Scratch::Implicit(s) = &mut self.scratch {
+            s.forget_prepared();
+        }
         self.rebuild(topology, &old_face_fragment);
         if let Some(fracture) = self.fracture.as_mut() {
             fracture.face_fragment_before = old_face_fragment;
@@ -1081,10 +1139,10 @@ impl Body {
             Some(energies) => energies,
             None => self.energy_parts(),
         };
-        let drift = before.total() - self.energy_start - self.external_work;
+        let drift = self.drift_of(before.total());
         self.change_topology(&[key], &[]);
         let after = self.energy_parts();
-        self.energy_start = after.total() - self.external_work - drift;
+        self.rebase(after.total(), drift);
         self.last = self.stats(1, 0, 0.0, 0, after);
         self.energy_now = Some(after);
         Ok(())
@@ -1108,7 +1166,7 @@ impl Body {
             volume,
             pressure,
             kinetic_energy: energies.kinetic,
-            energy_drift: energy - self.energy_start - self.external_work,
+            energy_drift: self.drift_of(energy),
             springs_broken: broken,
             cores_released: cores,
             topology_generation: self.generation,

@@ -111,9 +111,10 @@ pub struct SoftshellBodyStats {
     pub pressure: f64,
     /// Kinetic energy, J.
     pub kinetic_energy: f64,
-    /// Energy error: (kinetic + spring + gas + gravitational energy) minus its initial value and
-    /// the work of wind and impulses, J. Damping, contacts and leaks make it negative; a growing
-    /// positive value means the integrator is adding energy.
+    /// Energy error: (kinetic + spring + gas + gravitational energy) minus its initial value, the
+    /// work of wind and impulses, and the gas energy that leaks took away, J. Damping and
+    /// contacts make it negative; a growing positive value means the integrator is adding
+    /// energy.
     pub energy_drift: f64,
     /// Springs broken during this step.
     pub springs_broken: u64,
