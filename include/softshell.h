@@ -258,7 +258,7 @@ typedef struct SoftshellBodyDef {
   // [0, 1e6]. Default 0.
   float leak_rate;
   // A ground plane y = ground_height (normal +y); free vertices below it when the body is made
-  // start on it. Default false.
+  // start on it (`softshell_body_new` refuses a mesh entirely below it). Default false.
   bool ground;
   // Height of the ground plane, m. Default 0.
   float ground_height;
@@ -581,7 +581,8 @@ void softshell_body_free(struct SoftshellBody *body);
 // kept outside it with the def's restitution and friction. Free vertices inside it when it is
 // added move to its surface at once, their velocity into it removed; the energy drift goes on
 // from where it was (the move is not counted as work).
-// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius not > 0.
+// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius not > 0, and
+// (adding nothing) when every free vertex of the body is inside the sphere.
 //
 // # Safety
 // `body` must be NULL or a live body; `center` NULL or three readable floats.
@@ -593,7 +594,8 @@ SoftshellStatus softshell_body_add_sphere_obstacle(struct SoftshellBody *body,
 // any non-zero length, pointing to the free side); vertices are kept on the normal's side.
 // Free vertices behind it when it is added move onto the plane at once, their velocity into it
 // removed; the energy drift goes on from where it was (the move is not counted as work).
-// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a zero normal.
+// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a zero normal, and
+// (adding nothing) when every free vertex of the body is behind the plane.
 //
 // # Safety
 // `body` must be NULL or a live body; `point` and `normal` NULL or three readable floats each.

@@ -201,3 +201,42 @@ fn a_body_reaching_into_an_obstacle_starts_on_its_surface_and_steps_on() {
         }
     }
 }
+
+/// A body entirely inside an obstacle is refused, not spread over its surface (a review saw a
+/// ball inside a sphere obstacle stretched 100% and then gain 215 J): adding such an obstacle
+/// returns INVALID_ARGUMENT and changes nothing, and a mesh entirely below the ground is not
+/// made into a body.
+#[test]
+fn a_body_entirely_inside_an_obstacle_is_refused() {
+    let (p, t) = icosphere(2, 0.5);
+    let def = softshell_body_def_default();
+    let b = body(&p, &t, &def);
+    let before = snapshot(&b);
+    let center = [0.0f32; 3];
+    // SAFETY: live body, float[3].
+    let status = unsafe { softshell_body_add_sphere_obstacle(b.0, center.as_ptr(), 2.0) };
+    assert_eq!(status, SoftshellStatus::InvalidArgument);
+    assert!(last_error().contains("inside the obstacle"), "{}", last_error());
+    let (point, normal) = ([0.0f32, 1.0, 0.0], [0.0f32, 1.0, 0.0]);
+    // SAFETY: live body, float[3] arguments.
+    let status = unsafe { softshell_body_add_plane_obstacle(b.0, point.as_ptr(), normal.as_ptr()) };
+    assert_eq!(status, SoftshellStatus::InvalidArgument);
+    assert_eq!(snapshot(&b).positions, before.positions);
+    // Nothing was added: the body falls freely through where the sphere would be.
+    for _ in 0..60 {
+        step(&b);
+    }
+    assert!(snapshot(&b).center_y() < -1.0, "the refused obstacles must not hold the body");
+    // A sphere holding only part of the body is added.
+    let b = body(&p, &t, &def);
+    let center = [0.0f32, -0.9, 0.0];
+    // SAFETY: live body, float[3].
+    assert_eq!(unsafe { softshell_body_add_sphere_obstacle(b.0, center.as_ptr(), 0.5) }, SoftshellStatus::Ok);
+    // The ground above the whole mesh.
+    let mut d = def;
+    d.ground = true;
+    d.ground_height = 1.0;
+    let err = try_body(&p, &t, &d).err().expect("a mesh entirely below the ground");
+    assert_eq!(err.0, SoftshellStatus::InvalidArgument);
+    assert!(err.1.contains("below the ground"), "{}", err.1);
+}

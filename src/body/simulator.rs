@@ -323,8 +323,15 @@ impl Body {
             start_gas: 0.0,
             last: BodyStats::default(),
         };
-        // A mesh reaching into the ground starts on it (see `add_obstacle`).
+        // A mesh reaching into the ground starts on it (see `add_obstacle`), unless all of it is
+        // below.
         let obstacles = body.obstacles.clone();
+        if body.settings.ground && obstacles.first().is_some_and(|ground| body.holds_every_free_vertex(ground)) {
+            return Err(Error::invalid_argument(format!(
+                "every free vertex of the mesh is below the ground (ground_height {}): it would be flattened onto it",
+                body.settings.ground_height
+            )));
+        }
         body.move_outside(&obstacles);
         let energies = body.energy_parts();
         body.energy_start = energies.total();
@@ -428,11 +435,19 @@ impl Body {
     /// move is not counted as work). A step would take that push for energy made without a
     /// source, every time: XPBD turns it into a speed of depth/h, the explicit integrators into
     /// spring and gravitational energy, and a review found every later step UNSTABLE.
-    pub fn add_obstacle(&mut self, obstacle: Obstacle) {
+    ///
+    /// Error (nothing added) when every free vertex is inside it: the body would be spread over
+    /// its surface (a review saw a ball inside a sphere stretched 100% and then gain 215 J).
+    pub fn add_obstacle(&mut self, obstacle: Obstacle) -> Result<()> {
+        if self.holds_every_free_vertex(&obstacle) {
+            return Err(Error::invalid_argument(
+                "every free vertex of the body is inside the obstacle: it would be spread over its surface".to_owned(),
+            ));
+        }
         self.obstacles.push(obstacle);
         let inside = self.nodes.x.iter().zip(&self.nodes.inv_mass).any(|(x, &w)| w > 0.0 && obstacle.contains(*x));
         if !inside {
-            return;
+            return Ok(());
         }
         let before = match self.energy_now {
             Some(energies) => energies,
@@ -445,6 +460,13 @@ impl Body {
         self.given_mechanical += (after.kinetic + after.spring - before.kinetic - before.spring).max(0.0);
         // The state changed between steps: the next step measures it again.
         self.energy_now = None;
+        Ok(())
+    }
+
+    /// True when the body has free vertices and all of them are inside `obstacle`.
+    fn holds_every_free_vertex(&self, obstacle: &Obstacle) -> bool {
+        let mut free = self.nodes.x.iter().zip(&self.nodes.inv_mass).filter(|(_, w)| **w > 0.0).peekable();
+        free.peek().is_some() && free.all(|(x, _)| obstacle.contains(*x))
     }
 
     /// Moves the free vertices inside `obstacles` to their surface and removes their velocity

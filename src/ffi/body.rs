@@ -78,7 +78,7 @@ pub struct SoftshellBodyDef {
     /// [0, 1e6]. Default 0.
     pub leak_rate: f32,
     /// A ground plane y = ground_height (normal +y); free vertices below it when the body is made
-    /// start on it. Default false.
+    /// start on it (`softshell_body_new` refuses a mesh entirely below it). Default false.
     pub ground: bool,
     /// Height of the ground plane, m. Default 0.
     pub ground_height: f32,
@@ -370,7 +370,8 @@ pub unsafe extern "C" fn softshell_body_free(body: *mut SoftshellBody) {
 /// kept outside it with the def's restitution and friction. Free vertices inside it when it is
 /// added move to its surface at once, their velocity into it removed; the energy drift goes on
 /// from where it was (the move is not counted as work).
-/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius not > 0.
+/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius not > 0, and
+/// (adding nothing) when every free vertex of the body is inside the sphere.
 ///
 /// # Safety
 /// `body` must be NULL or a live body; `center` NULL or three readable floats.
@@ -386,8 +387,7 @@ pub unsafe extern "C" fn softshell_body_add_sphere_obstacle(
         check_range("radius", radius, f32::MIN_POSITIVE, 1e9)?;
         #[cfg(feature = "body")]
         {
-            h.body.add_obstacle(Obstacle::Sphere { center: Vec3::from_array(center), radius });
-            Ok(())
+            h.body.add_obstacle(Obstacle::Sphere { center: Vec3::from_array(center), radius })
         }
         #[cfg(not(feature = "body"))]
         {
@@ -401,7 +401,8 @@ pub unsafe extern "C" fn softshell_body_add_sphere_obstacle(
 /// any non-zero length, pointing to the free side); vertices are kept on the normal's side.
 /// Free vertices behind it when it is added move onto the plane at once, their velocity into it
 /// removed; the energy drift goes on from where it was (the move is not counted as work).
-/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a zero normal.
+/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a zero normal, and
+/// (adding nothing) when every free vertex of the body is behind the plane.
 ///
 /// # Safety
 /// `body` must be NULL or a live body; `point` and `normal` NULL or three readable floats each.
@@ -426,8 +427,7 @@ pub unsafe extern "C" fn softshell_body_add_plane_obstacle(
         #[cfg(feature = "body")]
         {
             let n = (Vec3::from_array(normal).as_dvec3() / length).as_vec3();
-            h.body.add_obstacle(Obstacle::Plane { point: Vec3::from_array(point), normal: n });
-            Ok(())
+            h.body.add_obstacle(Obstacle::Plane { point: Vec3::from_array(point), normal: n })
         }
         #[cfg(not(feature = "body"))]
         {
