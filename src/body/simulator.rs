@@ -151,6 +151,21 @@ pub struct Body {
     last: BodyStats,
 }
 
+/// The [`Model`] of a body's fields (a macro, not a method: the callers hold other fields of
+/// the body mutably at the same time, such as its positions or its integrator's scratch).
+macro_rules! model_of {
+    ($body:expr) => {
+        Model {
+            settings: &$body.settings,
+            triangles: &$body.triangles,
+            face_fragment: &$body.face_fragment,
+            springs: &$body.springs,
+            mass: &$body.nodes.mass,
+            inv_mass: &$body.nodes.inv_mass,
+        }
+    };
+}
+
 /// The fraction by which a body that may crack has room to grow (vertices, edges, faces) in the
 /// buffers the fracture writes: within it a cracking step moves no array and allocates no large
 /// one. Measured on the issue-5 balloon's first cracking step (benches/body_balloon.rs, 276
@@ -341,14 +356,7 @@ impl Body {
         // The implicit integrator's setup (coarse level, buffers) now rather than in the first
         // step (see `ImplicitScratch::prepare`).
         if let Scratch::Implicit(s) = &mut body.scratch {
-            let model = Model {
-                settings: &body.settings,
-                triangles: &body.triangles,
-                face_fragment: &body.face_fragment,
-                springs: &body.springs,
-                mass: &body.nodes.mass,
-                inv_mass: &body.nodes.inv_mass,
-            };
+            let model = model_of!(body);
             let h = body.settings.time_step / body.settings.substeps.max(1) as f32;
             let x = &body.nodes.x;
             body.pool.install(|| s.prepare(&model, x, h, body.pool.threads()));
@@ -922,14 +930,7 @@ impl Body {
     }
 
     fn integrate(&mut self, h: f32) -> (f64, usize) {
-        let model = Model {
-            settings: &self.settings,
-            triangles: &self.triangles,
-            face_fragment: &self.face_fragment,
-            springs: &self.springs,
-            mass: &self.nodes.mass,
-            inv_mass: &self.nodes.inv_mass,
-        };
+        let model = model_of!(self);
         let (x, v) = (&mut self.nodes.x, &mut self.nodes.v);
         let gas = self.gas.as_mut();
         let result = match &mut self.scratch {
@@ -968,14 +969,7 @@ impl Body {
     fn internal_forces(&mut self) -> Vec<Vec3> {
         let n = self.nodes.len();
         let mut f = vec![Vec3::ZERO; n];
-        let model = Model {
-            settings: &self.settings,
-            triangles: &self.triangles,
-            face_fragment: &self.face_fragment,
-            springs: &self.springs,
-            mass: &self.nodes.mass,
-            inv_mass: &self.nodes.inv_mass,
-        };
+        let model = model_of!(self);
         add_spring_forces(&model, &self.nodes.x, &self.nodes.v, &mut f);
         if let Some(gas) = self.gas.as_mut() {
             let mut gradient = vec![Vec3::ZERO; n];
