@@ -1088,8 +1088,9 @@ SoftshellStatus softshell_mesh_copy_triangles(const struct SoftshellMesh *mesh,
 
 // Copies one curvature value per vertex into `out`: `kind` is `SOFTSHELL_CURVATURE_MEAN`
 // (cotangent Laplacian over the mixed Voronoi area) or `SOFTSHELL_CURVATURE_GAUSSIAN` (angle
-// defect over the same area; boundary vertices use pi instead of 2 pi). Vertices without area
-// get 0. Any other `kind` is `SOFTSHELL_STATUS_INVALID_ARGUMENT`. Buffer rules as
+// defect over the same area; boundary vertices use pi instead of 2 pi). Degenerate triangles
+// (twice the area at most 1e-9 of the longest side squared) count for nothing, vertices without
+// area get 0, and a value beyond the float range is saturated at +-FLT_MAX. Any other `kind` is `SOFTSHELL_STATUS_INVALID_ARGUMENT`. Buffer rules as
 // `softshell_mesh_copy_positions` (one float per vertex).
 //
 // # Safety
@@ -1132,8 +1133,9 @@ struct SoftshellAnisotropyDef softshell_anisotropy_def_default(void);
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL argument, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
 // for a def not made by `softshell_shell_def_default`, an unknown kind or a field out of range
 // (the message names the field, its value and the valid range), `SOFTSHELL_STATUS_INVALID_MESH`
-// for a mesh that is not closed, manifold, consistently oriented with outward normals and free
-// of degenerate triangles (the message names the first offending edge or triangle),
+// for a mesh that is not closed, manifold, consistently oriented with outward normals (every
+// connected piece on its own) and free of degenerate triangles (the message names the first
+// offending edge or triangle), or larger than 1e6 m across (bounding-box diagonal),
 // `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` feature. On success `*out_shell` receives a
 // new handle to free with `softshell_shell_free`; on failure it is left unchanged.
 //

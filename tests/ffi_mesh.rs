@@ -493,3 +493,22 @@ fn ply_output_carries_both_curvatures_and_colours() {
     unsafe { softshell_mesh_free(mesh) };
     std::fs::remove_file(&path).ok();
 }
+
+#[test]
+fn curvature_of_an_accepted_sliver_mesh_is_finite() {
+    // A sliver tetrahedron 1e10 m long and a subnormal 1e-39 m thick: accepted (the mesh
+    // functions take degenerate meshes), and its curvature must not come back infinite.
+    let (l, h) = (1e10f32, 1e-39f32);
+    let positions = [0.0, 0.0, 0.0, l, 0.0, 0.0, 0.5 * l, h, 0.0, 0.5 * l, 0.0, h];
+    let mesh = mesh_from(&positions, &TETRA_TRIANGLES).unwrap();
+    for kind in [SOFTSHELL_CURVATURE_MEAN, SOFTSHELL_CURVATURE_GAUSSIAN] {
+        let mut out = [0.0f32; 4];
+        let mut len = 0;
+        // SAFETY: live mesh, writable buffer of 4.
+        let status = unsafe { softshell_mesh_copy_vertex_curvature(mesh, kind, out.as_mut_ptr(), 4, &mut len) };
+        assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+        assert!(out.iter().all(|v| v.is_finite()), "curvature kind {kind}: {out:?}");
+    }
+    // SAFETY: made above.
+    unsafe { softshell_mesh_free(mesh) };
+}

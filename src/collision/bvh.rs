@@ -155,6 +155,13 @@ impl Node {
     fn is_leaf(&self) -> bool {
         self.lanes != NOT_LEAF
     }
+
+    /// A leaf's lanes that hold a primitive (the padding after them is empty, but an infinite
+    /// query box still overlaps an empty one: +inf <= +inf).
+    #[inline(always)]
+    fn used_lanes(&self) -> u32 {
+        (1u32 << (self.b - self.a)) - 1
+    }
 }
 
 /// The f32 boxes of one leaf's primitives side by side (structure of arrays: `lo[axis][half]`
@@ -219,7 +226,8 @@ impl LeafLanes {
     }
 
     /// Bit `j` set when `q` overlaps the box in lane `j` (as [`Box32::overlaps`]: NaN bounds
-    /// and the empty padding overlap nothing).
+    /// overlap nothing; the empty padding overlaps nothing but an infinite `q`, so the callers
+    /// keep only [`Node::used_lanes`]).
     #[inline(always)]
     fn overlaps(&self, q: &Box32) -> u32 {
         let mut mask = 0;
@@ -507,11 +515,11 @@ impl Bvh {
         let lanes = &other.leaf_lanes[ny.lanes as usize];
         // Only the slots of `nx` that reach into `ny`'s box at all (one lane test): leaves that
         // meet mostly meet along a seam (kitten: this skips most slots of a visit).
-        let mut slots = self.leaf_lanes[nx.lanes as usize].overlaps(&ny.aabb);
+        let mut slots = self.leaf_lanes[nx.lanes as usize].overlaps(&ny.aabb) & nx.used_lanes();
         while slots != 0 {
             let k = nx.a as usize + slots.trailing_zeros() as usize;
             slots &= slots - 1;
-            let overlapping = lanes.overlaps(&self.leaf_boxes[k]);
+            let overlapping = lanes.overlaps(&self.leaf_boxes[k]) & ny.used_lanes();
             if overlapping == 0 {
                 continue;
             }
@@ -540,7 +548,7 @@ impl Bvh {
                 continue;
             }
             if node.is_leaf() {
-                let mut mask = self.leaf_lanes[node.lanes as usize].overlaps(q);
+                let mut mask = self.leaf_lanes[node.lanes as usize].overlaps(q) & node.used_lanes();
                 while mask != 0 {
                     let k = node.a as usize + mask.trailing_zeros() as usize;
                     mask &= mask - 1;
@@ -755,5 +763,29 @@ mod tests {
         }
         let empty = Box32::around(&Aabb::EMPTY);
         assert!(!empty.overlaps(&Box32::around(&Aabb { min: [0.0; 3], max: [1.0; 3] })));
+    }
+
+    /// A box that reaches infinity (a step diverging before its collision stage) overlaps every
+    /// primitive once and never the padding of a leaf (which read past the primitives).
+    #[test]
+    fn infinite_boxes_overlap_only_the_primitives() {
+        let boxes: Vec<Aabb> = (0..11).map(|i| Aabb { min: [i as f64; 3], max: [i as f64 + 0.5; 3] }).collect();
+        let everything = Aabb { min: [f64::NEG_INFINITY; 3], max: [f64::INFINITY; 3] };
+        let tree = Bvh::build(boxes.clone());
+        let probe = Bvh::build(vec![everything]);
+        let mut found = Vec::new();
+        tree.for_each_overlap(&probe, |i, j| found.push((i, j)));
+        probe.for_each_overlap(&tree, |j, i| found.push((i, j)));
+        found.sort_unstable();
+        let expected: Vec<(u32, u32)> = (0..11).flat_map(|i| [(i, 0), (i, 0)]).collect();
+        assert_eq!(found, expected);
+        let mut with_infinite = boxes;
+        with_infinite[3] = everything;
+        let tree = Bvh::build(with_infinite);
+        let mut pairs = Vec::new();
+        tree.for_each_self_overlap(|i, j| pairs.push((i, j)));
+        pairs.sort_unstable();
+        let expected: Vec<(u32, u32)> = (0..11).filter(|&i| i != 3).map(|i| (i.min(3), i.max(3))).collect();
+        assert_eq!(pairs, expected);
     }
 }

@@ -7,7 +7,9 @@ use super::boundary::{
     write_triples,
 };
 use crate::error::{Error, Result};
-use crate::mesh::{CurvatureKind, MeshReport, Topology, TriMesh, VertexScalar, save_ply, vertex_curvature};
+use crate::mesh::{
+    CurvatureKind, MeshReport, Topology, TriMesh, VertexScalar, curvature_f32, save_ply, vertex_curvature,
+};
 
 /// Mean curvature H (1/m), for `..._copy_vertex_curvature`: positive where the surface bends away
 /// from its outward normal (1 everywhere on a unit sphere).
@@ -257,7 +259,7 @@ pub unsafe extern "C" fn softshell_mesh_save_ply(
         let boundary = mesh.boundary_flags();
         let (positions, triangles) = (mesh.mesh.positions(), mesh.mesh.triangles());
         let as_f32 = |k| -> Vec<f32> {
-            vertex_curvature(positions, triangles, Some(&boundary), k).into_iter().map(|v| v as f32).collect()
+            vertex_curvature(positions, triangles, Some(&boundary), k).into_iter().map(curvature_f32).collect()
         };
         let (mean, gaussian) = (as_f32(CurvatureKind::Mean), as_f32(CurvatureKind::Gaussian));
         let scalars = [
@@ -381,8 +383,9 @@ pub unsafe extern "C" fn softshell_mesh_copy_triangles(
 
 /// Copies one curvature value per vertex into `out`: `kind` is `SOFTSHELL_CURVATURE_MEAN`
 /// (cotangent Laplacian over the mixed Voronoi area) or `SOFTSHELL_CURVATURE_GAUSSIAN` (angle
-/// defect over the same area; boundary vertices use pi instead of 2 pi). Vertices without area
-/// get 0. Any other `kind` is `SOFTSHELL_STATUS_INVALID_ARGUMENT`. Buffer rules as
+/// defect over the same area; boundary vertices use pi instead of 2 pi). Degenerate triangles
+/// (twice the area at most 1e-9 of the longest side squared) count for nothing, vertices without
+/// area get 0, and a value beyond the float range is saturated at +-FLT_MAX. Any other `kind` is `SOFTSHELL_STATUS_INVALID_ARGUMENT`. Buffer rules as
 /// `softshell_mesh_copy_positions` (one float per vertex).
 ///
 /// # Safety
@@ -408,7 +411,7 @@ pub unsafe extern "C" fn softshell_mesh_copy_vertex_curvature(
             copy_out(n, out, capacity, out_len, |dst| {
                 let values = vertex_curvature(mesh.mesh.positions(), mesh.mesh.triangles(), Some(&boundary), kind);
                 for (d, v) in dst.iter_mut().zip(values) {
-                    *d = v as f32;
+                    *d = curvature_f32(v);
                 }
             })
         }

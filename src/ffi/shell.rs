@@ -431,8 +431,9 @@ fn unsupported() -> Error {
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL argument, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
 /// for a def not made by `softshell_shell_def_default`, an unknown kind or a field out of range
 /// (the message names the field, its value and the valid range), `SOFTSHELL_STATUS_INVALID_MESH`
-/// for a mesh that is not closed, manifold, consistently oriented with outward normals and free
-/// of degenerate triangles (the message names the first offending edge or triangle),
+/// for a mesh that is not closed, manifold, consistently oriented with outward normals (every
+/// connected piece on its own) and free of degenerate triangles (the message names the first
+/// offending edge or triangle), or larger than 1e6 m across (bounding-box diagonal),
 /// `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` feature. On success `*out_shell` receives a
 /// new handle to free with `softshell_shell_free`; on failure it is left unchanged.
 ///
@@ -668,7 +669,7 @@ pub unsafe extern "C" fn softshell_shell_copy_vertex_curvature(
             unsafe {
                 copy_out(n, out, capacity, out_len, |dst| {
                     for (d, v) in dst.iter_mut().zip(shell.inner.vertex_curvature(kind)) {
-                        *d = v as f32;
+                        *d = crate::mesh::curvature_f32(v);
                     }
                 })
             }

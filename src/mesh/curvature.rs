@@ -4,6 +4,8 @@
 
 use glam::{DVec3, Vec3};
 
+use super::report::DEGENERATE_RELATIVE_AREA;
+
 /// Which curvature to compute.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CurvatureKind {
@@ -16,6 +18,12 @@ pub enum CurvatureKind {
 
 /// Below this |u × v| a corner is treated as degenerate and contributes nothing (SPEC 1.4 guard).
 const DEGENERATE: f64 = 1e-30;
+
+/// A curvature as the f32 the C ABI hands out: saturated at ±f32::MAX, never infinite (a
+/// nearly degenerate fan can pass f32's range; NaN cannot arise, areas are checked).
+pub fn curvature_f32(value: f64) -> f32 {
+    value.clamp(-f32::MAX as f64, f32::MAX as f64) as f32
+}
 
 fn cot(u: DVec3, v: DVec3) -> f64 {
     let cross = u.cross(v).length();
@@ -40,7 +48,11 @@ pub fn vertex_curvature(
         let p = t.map(|v| positions[v as usize].as_dvec3());
         let face_normal = (p[1] - p[0]).cross(p[2] - p[0]);
         let double_area = face_normal.length();
-        if double_area < DEGENERATE {
+        let longest =
+            (p[1] - p[0]).length_squared().max((p[2] - p[1]).length_squared()).max((p[0] - p[2]).length_squared());
+        // A face the mesh report calls degenerate (relative to its size) gives nothing: its
+        // cotangents and angle sums would make curvatures past any float's range.
+        if double_area < DEGENERATE || double_area <= DEGENERATE_RELATIVE_AREA * longest {
             continue;
         }
         let face_area = 0.5 * double_area;

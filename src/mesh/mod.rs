@@ -13,7 +13,7 @@ mod report;
 mod topology;
 mod tri_mesh;
 
-pub use curvature::{CurvatureKind, vertex_curvature};
+pub use curvature::{CurvatureKind, curvature_f32, vertex_curvature};
 pub(crate) use incidence::vertex_incidence;
 pub use measures::{
     BoundingBox, bounding_box, face_area_vectors, signed_volume, signed_volume_f64, surface_area, triangle_min_angle,

@@ -8,7 +8,7 @@ use crate::error::{Error, Result};
 
 /// A triangle is degenerate when twice its area is below this fraction of its longest side
 /// squared (the sine of its largest angle is numerically zero), or when it repeats a vertex.
-const DEGENERATE_RELATIVE_AREA: f64 = 1e-9;
+pub(crate) const DEGENERATE_RELATIVE_AREA: f64 = 1e-9;
 
 /// Everything `softshell_mesh_report` returns, plus a few extras.
 #[derive(Clone, Debug, PartialEq)]
@@ -164,6 +164,32 @@ pub fn require_closed_oriented_solid(mesh: &TriMesh, topology: &Topology, what: 
         return Err(Error::invalid_mesh(format!(
             "{what} needs outward (counter-clockwise from outside) triangles: the signed volume is {volume:e}; reverse the winding of every triangle"
         )));
+    }
+    // Each closed piece on its own: an inward piece beside a larger outward one leaves the total
+    // positive, but pressure would inflate it and a gas body would give it no gas. (A hollow
+    // solid, an inward surface nested in an outward one, is refused too: neither simulator
+    // models a cavity.)
+    if topology.component_count > 1 {
+        let positions = mesh.positions();
+        let mut volumes = vec![0.0f64; topology.component_count];
+        let mut first_face = vec![u32::MAX; topology.component_count];
+        for (f, _) in triangles.iter().enumerate().rev() {
+            first_face[topology.face_components[f] as usize] = f as u32;
+        }
+        for (f, t) in triangles.iter().enumerate() {
+            let c = topology.face_components[f] as usize;
+            // About a corner of the piece, not the origin: the same volume, less cancellation.
+            let origin = positions[triangles[first_face[c] as usize][0] as usize].as_dvec3();
+            let [a, b, d] = t.map(|v| positions[v as usize].as_dvec3() - origin);
+            volumes[c] += a.dot(b.cross(d)) / 6.0;
+        }
+        if let Some(c) = (0..volumes.len()).find(|&c| volumes[c] <= 0.0) {
+            return Err(Error::invalid_mesh(format!(
+                "{what} needs every closed piece wound outward (counter-clockwise from outside): the piece of triangle {} \
+                 encloses a signed volume of {:e}; reverse the winding of its triangles",
+                first_face[c], volumes[c]
+            )));
+        }
     }
     Ok(())
 }

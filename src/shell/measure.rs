@@ -22,7 +22,8 @@ impl State {
             let (mut energy, mut residual) = (0.0f64, 0.0f64);
             for i in s..e {
                 let (w, _) = membrane_energy_at(m, i, x, c);
-                energy += (k * w) as f64;
+                // In f64: k w can pass f32's range on a large mesh of a stiff material.
+                energy += k as f64 * w as f64;
                 let cval = (2.0 * w).max(0.0).sqrt();
                 let r = if xpbd { cval + c.alpha_membrane * lm[i] } else { cval };
                 residual = residual.max((r.abs() / m.area[i].sqrt()) as f64);
@@ -59,7 +60,7 @@ impl State {
                     let v = bending_residual(&xs, &b.k[i], c.keep_rest.then(|| b.rest_local[i]));
                     let w = 0.5 * b.q[i] * v.length_squared();
                     let stiffness = k * settings.bending_coefficient * stencil_area(b.q[i]);
-                    energy += (stiffness * w) as f64;
+                    energy += k as f64 * settings.bending_coefficient as f64 * stencil_area(b.q[i]) as f64 * w as f64;
                     let cval = (2.0 * w).max(0.0).sqrt();
                     let r = if xpbd && stiffness > 0.0 {
                         cval + lb[i] / (stiffness * settings.time_step.powi(2) / (settings.substeps as f32).powi(2))
@@ -86,7 +87,7 @@ impl State {
                     let t = &a.tri[i];
                     let xs = [x[t[0] as usize], x[t[1] as usize], x[t[2] as usize]];
                     let (w, _, params) = gather_aniso(a, i, xs);
-                    energy += (params.stiffness * settings.thickness * w) as f64;
+                    energy += params.stiffness as f64 * settings.thickness as f64 * w as f64;
                     let cval = (2.0 * w).max(0.0).sqrt();
                     let r = if xpbd { cval + la[i] / (params.stiffness * c.aniso_scale) } else { cval };
                     res = res.max((r.abs() / a.area[i].sqrt()) as f64);

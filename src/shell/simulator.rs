@@ -63,6 +63,12 @@ pub(crate) const STALL_STEPS: u32 = 60;
 /// no contraction moves a surface that far, only a blow-up does.
 const DIVERGED_DIAGONALS: f32 = 2.0;
 
+/// Largest bounding-box diagonal of a shell's mesh, m. The solver works in f32 and squares
+/// lengths and areas (|e1 x e2|² grows as the fourth power of the size, past f32's range near
+/// 1e9 m; the energies multiply that by moduli up to 1e12): a mesh under 1e6 m keeps every such
+/// product finite, a larger one is refused with the advice to rescale it.
+pub(crate) const MAX_DIAGONAL: f32 = 1e6;
+
 /// A step in which more than 1/this of the triangles' normals turn by more than 90 degrees is
 /// taken as an inversion (a surface folding through itself), not as motion.
 const INVERTED_FRACTION_DENOMINATOR: usize = 4;
@@ -147,6 +153,14 @@ impl Shell {
     /// validated (the C boundary does it).
     pub fn new(mesh: &TriMesh, topology: &Topology, settings: ShellSettings) -> Result<Self> {
         require_closed_oriented_solid(mesh, topology, "the shell")?;
+        let extent = bounding_box(mesh.positions()).diagonal();
+        if !(extent <= MAX_DIAGONAL) {
+            return Err(Error::invalid_mesh(format!(
+                "the shell's mesh is {extent:e} m across (its bounding-box diagonal); at most {MAX_DIAGONAL:e} m is \
+                 supported (the f32 solver squares lengths and areas): scale the mesh down and the pressure and \
+                 moduli with it"
+            )));
+        }
         let pool = WorkerPool::new(settings.threads)?;
         let rest = mesh.positions().to_vec();
         let triangles = mesh.triangles().to_vec();
@@ -363,7 +377,8 @@ impl Shell {
         let mut out = vec![0.0f32; s.triangles.len()];
         for i in 0..s.membranes.len() {
             let (w, _) = membrane_energy_at(&s.membranes, i, &s.x, &coeff);
-            out[s.membranes.face[i] as usize] = k * w;
+            // Saturated at f32::MAX rather than infinite (a huge mesh of a stiff material).
+            out[s.membranes.face[i] as usize] = (k as f64 * w as f64).min(f32::MAX as f64) as f32;
         }
         out
     }
@@ -424,6 +439,8 @@ impl State {
             // SPEC 1.1 step 3: collisions over x_t -> p, between the constraint sweeps and the
             // velocity update.
             if self.contact.is_some() {
+                // A diverged p would give the collision stage infinite boxes: fail first.
+                self.check_motion(settings, parallel)?;
                 let start = Instant::now();
                 let counts = self.resolve_collisions(settings, h);
                 report.counts.add(&counts);
@@ -502,9 +519,10 @@ impl State {
         });
     }
 
-    /// SPEC 1.1 step 5: `v = (p - x)/h` (damped), `x = p`; refuses a non-finite or runaway
-    /// vertex before anything is committed to x.
-    fn update_velocities(&mut self, settings: &ShellSettings, h: f32, parallel: bool) -> Result<()> {
+    /// The divergence test of a substep: every vertex's move `p - x` finite and under
+    /// `DIVERGED_DIAGONALS` bounding-box diagonals. Run before the collision stage too, whose
+    /// bounding boxes must be finite.
+    fn check_motion(&mut self, settings: &ShellSettings, parallel: bool) -> Result<()> {
         let n = self.x.len();
         let limit = (DIVERGED_DIAGONALS * self.diagonal).powi(2);
         let (x, pp) = (&self.x, &self.p);
@@ -531,6 +549,14 @@ impl State {
             };
             return Err(self.unstable(settings, &what));
         }
+        Ok(())
+    }
+
+    /// SPEC 1.1 step 5: `v = (p - x)/h` (damped), `x = p`; refuses a non-finite or runaway
+    /// vertex before anything is committed to x.
+    fn update_velocities(&mut self, settings: &ShellSettings, h: f32, parallel: bool) -> Result<()> {
+        self.check_motion(settings, parallel)?;
+        let n = self.x.len();
         let damp = (1.0 - settings.damping * h).max(0.0);
         let inv_h = 1.0 / h;
         let (p, p_lo) = (&self.p, &self.p_lo);

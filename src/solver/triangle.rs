@@ -20,7 +20,8 @@ pub struct TriangleRest {
 /// `Dm = [[|e1|, t1·e2], [0, t2·e2]]`. `None` for a degenerate triangle (`det Dm` below
 /// `1e-12 |e|²`): its `Dm^-1` would be meaningless.
 pub fn triangle_rest(x0: Vec3, x1: Vec3, x2: Vec3) -> Option<TriangleRest> {
-    let (e1, e2) = (x1 - x0, x2 - x0);
+    // In f64: |e1 x e2|² passes f32's range for edges over about 1e9 (a NaN Dm^-1 then).
+    let (e1, e2) = ((x1 - x0).as_dvec3(), (x2 - x0).as_dvec3());
     let len1 = e1.length();
     let normal = e1.cross(e2);
     let scale = e1.length_squared().max(e2.length_squared());
@@ -31,8 +32,12 @@ pub fn triangle_rest(x0: Vec3, x1: Vec3, x2: Vec3) -> Option<TriangleRest> {
     let t2 = normal.cross(t1).normalize();
     let (a, b, c) = (len1, t1.dot(e2), t2.dot(e2));
     // Upper triangular inverse: [[1/a, -b/(a c)], [0, 1/c]].
-    let dm_inv = [1.0 / a, -b / (a * c), 0.0, 1.0 / c];
-    Some(TriangleRest { dm_inv, area: 0.5 * a * c, basis: Mat32::new(t1, t2) })
+    let dm_inv = [1.0 / a, -b / (a * c), 0.0, 1.0 / c].map(|v| v as f32);
+    let area = (0.5 * a * c) as f32;
+    if !(area > 0.0 && area.is_finite() && dm_inv.iter().all(|v| v.is_finite())) {
+        return None;
+    }
+    Some(TriangleRest { dm_inv, area, basis: Mat32::new(t1.as_vec3(), t2.as_vec3()) })
 }
 
 /// `F = Ds Dm^-1` with `Ds = [x1 - x0, x2 - x0]`.

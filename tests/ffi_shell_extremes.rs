@@ -1,0 +1,136 @@
+//! The shell through the C ABI on inputs at the edge of what it accepts (from a review): a step
+//! that diverges with collisions on, a mesh near the f32 range, a mesh with one component wound
+//! inward. Each must end in a status and a message, never a panic, a NaN or a wrong answer.
+
+mod common;
+
+use std::ptr::null_mut;
+
+use common::*;
+use softshell::ffi::SoftshellStatus;
+use softshell::ffi::mesh::*;
+use softshell::ffi::shell::*;
+
+const TETRA_POSITIONS: [f32; 12] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+const TETRA_TRIANGLES: [u32; 12] = [0, 2, 1, 0, 1, 3, 1, 2, 3, 0, 3, 2];
+
+/// One step of the sphere of data/ with a def that blows up in its first substep (a weightless
+/// shell under the largest pressure accepted): the status and message of that step, and whether
+/// the shell still answers afterwards with its positions from before the step.
+fn diverging_step(collisions: bool) -> (SoftshellStatus, String, bool) {
+    let mesh = load_data_mesh("sphere.obj");
+    let before = mesh_positions(mesh);
+    let mut def = softshell_shell_def_default();
+    def.density = 1e-30;
+    def.thickness = 1e-9;
+    def.pressure = 1e12;
+    def.collisions = collisions;
+    let mut shell = null_mut();
+    // SAFETY: live mesh, valid def, writable out pointer; the shell is freed below.
+    unsafe {
+        assert_eq!(softshell_shell_new(mesh, &def, &mut shell), SoftshellStatus::Ok, "{}", last_error());
+        let status = softshell_shell_step(shell, null_mut());
+        let message = last_error();
+        let mut after = vec![0.0f32; before.len()];
+        let mut len = 0;
+        let copied = softshell_shell_copy_positions(shell, after.as_mut_ptr(), after.len(), &mut len);
+        softshell_shell_free(shell);
+        softshell_mesh_free(mesh);
+        (status, message, copied == SoftshellStatus::Ok && after == before)
+    }
+}
+
+#[test]
+fn a_step_that_diverges_with_collisions_on_is_rolled_back() {
+    for collisions in [false, true] {
+        let (status, message, unchanged) = diverging_step(collisions);
+        assert_eq!(status, SoftshellStatus::Unstable, "collisions {collisions}: {message}");
+        assert!(message.contains("would be stable"), "collisions {collisions}: no advice in {message:?}");
+        assert!(unchanged, "collisions {collisions}: the failed step changed or poisoned the shell");
+    }
+}
+
+#[test]
+fn a_mesh_too_large_for_f32_is_refused_with_advice() {
+    // A tetrahedron of edge 4e9 m: |e1 x e2|^2 passes f32's range while the positions do not
+    // (its energies came back NaN).
+    let positions = TETRA_POSITIONS.map(|c| c * 4.0e9);
+    let mesh = mesh_from(&positions, &TETRA_TRIANGLES).unwrap();
+    let mut shell = null_mut();
+    // SAFETY: live mesh, valid def; a shell made by mistake is freed.
+    let (status, message) = unsafe {
+        let status = softshell_shell_new(mesh, &softshell_shell_def_default(), &mut shell);
+        let message = last_error();
+        softshell_shell_free(shell);
+        softshell_mesh_free(mesh);
+        (status, message)
+    };
+    assert_eq!(status, SoftshellStatus::InvalidMesh, "accepted ({message})");
+    assert!(message.contains("across") && message.contains("scale the mesh down"), "{message}");
+}
+
+#[test]
+fn the_largest_mesh_accepted_with_the_stiffest_settings_reports_finite_numbers() {
+    // Just under the size limit (diagonal 1e6 m), every modulus at the top of its range: each
+    // step ends OK or UNSTABLE, and whatever it reports is finite.
+    let positions = TETRA_POSITIONS.map(|c| c * 0.57e6);
+    let mesh = mesh_from(&positions, &TETRA_TRIANGLES).unwrap();
+    let mut def = softshell_shell_def_default();
+    def.density = 1e-4;
+    def.thickness = 1e3;
+    def.youngs_modulus = 1e12;
+    def.bending_coefficient = 1e6;
+    def.pressure = 1e12;
+    let mut shell = null_mut();
+    // SAFETY: live mesh, valid def; freed below.
+    unsafe {
+        assert_eq!(softshell_shell_new(mesh, &def, &mut shell), SoftshellStatus::Ok, "{}", last_error());
+        for step in 0..5 {
+            let mut stats = SoftshellShellStats::default();
+            let status = softshell_shell_step(shell, &mut stats);
+            assert!(
+                matches!(status, SoftshellStatus::Ok | SoftshellStatus::Unstable),
+                "step {step}: {status:?} {}",
+                last_error()
+            );
+            if status == SoftshellStatus::Ok {
+                for (name, value) in [
+                    ("volume_ratio", stats.volume_ratio),
+                    ("residual", stats.residual),
+                    ("elastic_energy", stats.elastic_energy),
+                    ("bending_energy", stats.bending_energy),
+                ] {
+                    assert!(value.is_finite(), "step {step}: {name} = {value}");
+                }
+            }
+            let mut energy = [0.0f32; 4];
+            let mut len = 0;
+            assert_eq!(softshell_shell_copy_face_energy(shell, energy.as_mut_ptr(), 4, &mut len), SoftshellStatus::Ok);
+            assert!(energy.iter().all(|e| e.is_finite()), "step {step}: face energies {energy:?}");
+        }
+        softshell_shell_free(shell);
+        softshell_mesh_free(mesh);
+    }
+}
+
+#[test]
+fn a_component_wound_inward_is_refused_even_beside_an_outward_one() {
+    // An outward tetrahedron and, apart from it, a smaller one wound inward: the total signed
+    // volume is positive, but under outside pressure the second would inflate.
+    let mut positions = TETRA_POSITIONS.to_vec();
+    positions.extend(TETRA_POSITIONS.iter().map(|c| c * 0.5 + 5.0));
+    let mut triangles = TETRA_TRIANGLES.to_vec();
+    triangles.extend(TETRA_TRIANGLES.chunks(3).flat_map(|t| [t[0] + 4, t[2] + 4, t[1] + 4]));
+    let mesh = mesh_from(&positions, &triangles).unwrap();
+    let mut shell = null_mut();
+    // SAFETY: live mesh, valid def; a shell made by mistake is freed.
+    let (status, message) = unsafe {
+        let status = softshell_shell_new(mesh, &softshell_shell_def_default(), &mut shell);
+        let message = last_error();
+        softshell_shell_free(shell);
+        softshell_mesh_free(mesh);
+        (status, message)
+    };
+    assert_eq!(status, SoftshellStatus::InvalidMesh, "accepted ({message})");
+    assert!(message.contains("every closed piece wound outward") && message.contains("triangle 4"), "{message}");
+}
