@@ -31,8 +31,12 @@
 // `h^2 omega^2 + 2 h gamma < 4` (`h < 2/omega` without damping; `omega`, `gamma` as above).
 #define SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER 1
 
-// Linearised backward Euler solved by conjugate gradients: stable at any time step, with
-// numerical damping. The default.
+// Linearised backward Euler solved by conjugate gradients: stable at any time step for springs
+// and gas as stiff as allowed, with numerical damping. The default. Its one linearised step can
+// still blow up where a step moves a vertex by more than its springs' length (a tiny piece
+// crushed on the ground): a step is `SOFTSHELL_STATUS_UNSTABLE` (rolled back; raise `substeps`)
+// when the energy made without a source (`energy_drift`) is over 20 times what the body was
+// given and has more than doubled, two steps in a row. XPBD likewise.
 #define SOFTSHELL_INTEGRATOR_IMPLICIT_EULER 2
 
 // XPBD: springs as distance constraints with compliance 1/K_s, gas as a volume constraint;
@@ -236,7 +240,8 @@ typedef struct SoftshellBodyDef {
   // Spring damping K_d along each spring, N s/m, in [0, 1e9]. Default 1.
   float spring_damping;
   // Amount of gas nRT, J (pressure = nRT / volume), in [0, 1e12]. 0 (default) = no gas; then
-  // open meshes (cloth) are allowed. With gas the mesh must be closed, manifold and outward.
+  // open meshes (cloth) are allowed. With gas the mesh must be closed, manifold and outward
+  // (every connected piece).
   float gas_amount;
   // Gravity, m/s^2. Default 0, -9.81, 0.
   float gravity[3];
@@ -559,7 +564,7 @@ struct SoftshellBodyDef softshell_body_def_default(void);
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL pointer, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
 // for a def not made by `softshell_body_def_default` or a field out of range (the message names
 // it), `SOFTSHELL_STATUS_INVALID_MESH` when the mesh does not suit (with gas: not closed,
-// manifold and outward; always: a triangle with a repeated corner or an edge of zero length),
+// manifold and outward, every connected piece on its own; always: a triangle with a repeated corner or an edge of zero length),
 // `SOFTSHELL_STATUS_UNSUPPORTED` when built without the `body` feature. On success
 // `*out_body` receives a new handle to free with `softshell_body_free`; on failure it is left
 // unchanged.

@@ -70,6 +70,20 @@ fn gas_needs_a_closed_mesh_and_cloth_needs_none() {
     let (status, message) = try_body(&p, &flipped, &def).err().unwrap();
     assert_eq!(status, SoftshellStatus::InvalidMesh);
     assert!(message.contains("winding"), "{message}");
+    // So is one wound inward beside a larger outward one (the total volume is positive; the
+    // inward piece got no gas and nothing said so: a review).
+    let (mut p, mut t) = icosphere(2, 0.5);
+    let (q, u) = icosphere(1, 0.3);
+    let offset = (p.len() / 3) as u32;
+    p.extend(q.chunks(3).flat_map(|v| [v[0] + 2.0, v[1], v[2]]));
+    t.extend(u.chunks(3).flat_map(|c| [c[0] + offset, c[2] + offset, c[1] + offset]));
+    assert!(Mesh::new(&p, &t).report().volume > 0.0);
+    let (status, message) = try_body(&p, &t, &def).err().expect("an inward piece was accepted");
+    assert_eq!(status, SoftshellStatus::InvalidMesh);
+    assert!(message.contains("every closed piece wound outward"), "{message}");
+    // Without gas the winding does not matter.
+    def.gas_amount = 0.0;
+    assert!(try_body(&p, &t, &def).is_ok());
 }
 
 #[test]

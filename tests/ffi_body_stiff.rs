@@ -282,3 +282,30 @@ fn explicit_euler_falls_from_rest_without_being_called_unstable() {
     let expected = 0.5 * def.total_mass as f64 * (9.81 * stats.time).powi(2);
     assert!((stats.kinetic_energy - expected).abs() < 0.05 * expected, "{stats:?}, expected {expected}");
 }
+
+/// XPBD with a spring stiffness at the bottom of its range: every step was UNSTABLE ("vertex 0
+/// reached a NaN": `1/(K_s h²)` overflowed and met a zero), whatever the substeps the message
+/// advised (found in review). The update no longer divides by K_s.
+#[test]
+fn xpbd_takes_the_softest_springs_allowed() {
+    let (positions, triangles) = icosphere(1, 0.5);
+    for (ks, kd) in [(1e-30f32, 1e9f32), (1e-38, 1.0), (0.0, 1e9)] {
+        for substeps in [1u32, 20] {
+            let mut def = softshell_body_def_default();
+            def.integrator = SOFTSHELL_INTEGRATOR_XPBD;
+            def.spring_stiffness = ks;
+            def.spring_damping = kd;
+            def.substeps = substeps;
+            let b = body(&positions, &triangles, &def);
+            for k in 0..10 {
+                match try_step(&b) {
+                    Ok(stats) => assert!(stats.kinetic_energy.is_finite() && stats.volume.is_finite()),
+                    Err((status, message)) => {
+                        panic!("K_s = {ks:e}, K_d = {kd:e}, substeps {substeps}, step {k}: {status:?}: {message}")
+                    }
+                }
+            }
+            assert!(snapshot(&b).positions.iter().all(|p| p.is_finite()));
+        }
+    }
+}

@@ -37,23 +37,25 @@ impl XpbdScratch {
 }
 
 /// XPBD distance-constraint update (SPEC 2.2): returns `Δλ` for a spring with current vector
-/// `d = p_j - p_i`, accumulated `lambda`, inverse masses, compliance `alpha_tilde = 1/(K_s h²)`
-/// and damping `gamma = K_d/(K_s h)` times `∇C·(p - x_prev)` given as `velocity_term`.
-/// Positions then move by `Δp_i = -w_i u Δλ`, `Δp_j = w_j u Δλ`.
+/// `d = p_j - p_i`, accumulated `lambda`, inverse masses, compliance `α̃ = 1/(K_s h²)` and
+/// damping `γ = K_d/(K_s h)` times `∇C·(p - x_prev)` given as `velocity_term`:
+/// `Δλ = (-C - α̃ λ - γ ∇C·Δx) / ((1 + γ)(w_i + w_j) + α̃)`, here with numerator and denominator
+/// times `K_s h²` (given as `stiffness_h2`, with `damping_h = K_d h`), so a spring of tiny K_s
+/// neither divides by it (1/(K_s h²) passed f32's range at K_s = 1e-38, and `∞ · 0` made a
+/// NaN: a review) nor loses its damping. Positions then move by `Δp_i = -w_i u Δλ`,
+/// `Δp_j = w_j u Δλ`.
 pub(crate) fn distance_delta_lambda(
     c: f32,
     lambda: f32,
     wi: f32,
     wj: f32,
-    alpha_tilde: f32,
-    gamma: f32,
+    stiffness_h2: f32,
+    damping_h: f32,
     velocity_term: f32,
 ) -> f32 {
-    let denominator = (1.0 + gamma) * (wi + wj) + alpha_tilde;
-    if denominator <= f32::MIN_POSITIVE {
-        return 0.0;
-    }
-    (-c - alpha_tilde * lambda - gamma * velocity_term) / denominator
+    let denominator = (stiffness_h2 + damping_h) * (wi + wj) + 1.0;
+    let numerator = -c * stiffness_h2 - lambda - damping_h * velocity_term;
+    numerator / denominator
 }
 
 /// One substep of length `h` with `iterations` Gauss-Seidel sweeps; returns the wind work, J.
@@ -91,8 +93,7 @@ pub(crate) fn substep(
         s.gas_lambda.resize(gas.fragment_count(), 0.0);
         s.gas_norm.resize(gas.fragment_count(), 0.0);
     }
-    let alpha_tilde = if ks > 0.0 { 1.0 / (ks * h * h) } else { f32::INFINITY };
-    let gamma = if ks > 0.0 { kd / (ks * h) } else { 0.0 };
+    let (stiffness_h2, damping_h) = (ks * h * h, kd * h);
     for _ in 0..iterations.max(1) {
         if let Some(gas) = gas.as_deref_mut() {
             gas.measure_with_gradient(x, model.triangles, model.face_fragment, &mut s.gradient);
@@ -143,8 +144,8 @@ pub(crate) fn substep(
                     s.lambda[k],
                     model.inv_mass[i],
                     model.inv_mass[j],
-                    alpha_tilde,
-                    gamma,
+                    stiffness_h2,
+                    damping_h,
                     velocity_term,
                 );
                 s.lambda[k] += dl;
@@ -194,11 +195,31 @@ mod tests {
 
     #[test]
     fn stiff_distance_constraint_is_solved_in_one_update() {
-        let dl = distance_delta_lambda(0.5, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0);
+        // K_s h² = 1e12 (the stiffest spring allowed at h = 1): as good as rigid.
+        let dl = distance_delta_lambda(0.5, 0.0, 1.0, 1.0, 1e12, 0.0, 0.0);
         // Each end moves by 0.25 towards the other: the constraint is met.
         assert!((dl + 0.25).abs() < 1e-6);
-        assert_eq!(distance_delta_lambda(0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), 0.0);
-        // Compliance softens it.
-        assert!(distance_delta_lambda(0.5, 0.0, 1.0, 1.0, 2.0, 0.0, 0.0).abs() < 0.25);
+        assert_eq!(distance_delta_lambda(0.5, 0.0, 0.0, 0.0, 1e12, 0.0, 0.0), -0.5e12);
+        // Compliance (α̃ = 1/(K_s h²) = 2) softens it: -0.5 / (2 + 2).
+        assert!((distance_delta_lambda(0.5, 0.0, 1.0, 1.0, 0.5, 0.0, 0.0) + 0.125).abs() < 1e-6);
+    }
+
+    /// The form of the update without 1/K_s: the same as the textbook one where that is finite,
+    /// and finite (damping only) where K_s is too small for it.
+    #[test]
+    fn the_update_needs_no_division_by_the_stiffness() {
+        let (ks, kd, h) = (300.0f32, 2.0f32, 0.01f32);
+        let (alpha, gamma) = (1.0 / (ks * h * h), kd / (ks * h));
+        let (c, lambda, wi, wj, vt) = (0.02f32, -0.003f32, 2.0f32, 0.5f32, 0.004f32);
+        let textbook = (-c - alpha * lambda - gamma * vt) / ((1.0 + gamma) * (wi + wj) + alpha);
+        let ours = distance_delta_lambda(c, lambda, wi, wj, ks * h * h, kd * h, vt);
+        assert!((ours - textbook).abs() <= 1e-6 * textbook.abs(), "{ours} vs {textbook}");
+        for ks in [1e-30f32, 1e-38, 1e-45] {
+            let dl = distance_delta_lambda(c, lambda, wi, wj, ks * h * h, 1e9 * h, vt);
+            assert!(dl.is_finite(), "K_s = {ks:e}: {dl}");
+            // Damping alone: -(λ + K_d h vt) / (K_d h W + 1).
+            let damped = -(lambda + 1e9 * h * vt) / (1e9 * h * (wi + wj) + 1.0);
+            assert!((dl - damped).abs() <= 1e-5 * damped.abs(), "K_s = {ks:e}: {dl} vs {damped}");
+        }
     }
 }
