@@ -29,7 +29,7 @@ pub const SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER: u32 = 1;
 /// still blow up where a step moves a vertex by more than its springs' length (a tiny piece
 /// crushed on the ground): a step is `SOFTSHELL_STATUS_UNSTABLE` (rolled back; raise `substeps`)
 /// when the energy made without a source (`energy_drift`) is over 20 times what the body was
-/// given and has more than doubled, two steps in a row. XPBD likewise.
+/// given and has more than doubled, two steps in a row.
 pub const SOFTSHELL_INTEGRATOR_IMPLICIT_EULER: u32 = 2;
 /// XPBD: springs as distance constraints with compliance 1/K_s, gas as a volume constraint;
 /// `iterations` Gauss-Seidel sweeps per substep.
