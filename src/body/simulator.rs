@@ -200,9 +200,9 @@ const EXPLICIT_DRIFT_LIMIT: f64 = 1.0;
 const SYMPLECTIC_DRIFT_LIMIT: f64 = 20.0;
 
 /// The same for implicit Euler, where the drift must also have more than doubled in each of the
-/// two steps (see the step; XPBD has no such test). They blow up where one linearised (or projected) step
-/// moves a vertex by more than its springs' length: a review dropped a 1e-4 m gas ball on the
-/// ground at h = 1/60 s; flattened there, its springs reached a strain of 5,000 and the body
+/// two steps (see the step; XPBD has no such test). Implicit Euler blows up where one linearised
+/// step moves a vertex by more than its springs' length: a review dropped a 1e-4 m gas ball on
+/// the ground at h = 1/60 s; flattened there, its springs reached a strain of 5,000 and the body
 /// 1e11 J with every step returning OK, because the energy went into the springs, not into
 /// motion, and only the kinetic energy was tested.
 const IMPLICIT_DRIFT_LIMIT: f64 = 20.0;
