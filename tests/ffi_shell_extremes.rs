@@ -2,6 +2,8 @@
 //! that diverges with collisions on, a mesh near the f32 range, a mesh with one component wound
 //! inward. Each must end in a status and a message, never a panic, a NaN or a wrong answer.
 
+#![cfg(feature = "shell")]
+
 mod common;
 
 use std::ptr::null_mut;
