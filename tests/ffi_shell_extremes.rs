@@ -42,6 +42,21 @@ fn diverging_step(collisions: bool) -> (SoftshellStatus, String, bool) {
     }
 }
 
+/// The status and message of `softshell_shell_new` with the default def on this mesh (a shell
+/// made anyway is freed).
+fn new_shell_status(positions: &[f32], triangles: &[u32]) -> (SoftshellStatus, String) {
+    let mesh = mesh_from(positions, triangles).unwrap();
+    let mut shell = null_mut();
+    // SAFETY: live mesh, valid def; both freed here.
+    unsafe {
+        let status = softshell_shell_new(mesh, &softshell_shell_def_default(), &mut shell);
+        let message = last_error();
+        softshell_shell_free(shell);
+        softshell_mesh_free(mesh);
+        (status, message)
+    }
+}
+
 #[test]
 fn a_step_that_diverges_with_collisions_on_is_rolled_back() {
     for collisions in [false, true] {
@@ -57,16 +72,7 @@ fn a_mesh_too_large_for_f32_is_refused_with_advice() {
     // A tetrahedron of edge 4e9 m: |e1 x e2|^2 passes f32's range while the positions do not
     // (its energies came back NaN).
     let positions = TETRA_POSITIONS.map(|c| c * 4.0e9);
-    let mesh = mesh_from(&positions, &TETRA_TRIANGLES).unwrap();
-    let mut shell = null_mut();
-    // SAFETY: live mesh, valid def; a shell made by mistake is freed.
-    let (status, message) = unsafe {
-        let status = softshell_shell_new(mesh, &softshell_shell_def_default(), &mut shell);
-        let message = last_error();
-        softshell_shell_free(shell);
-        softshell_mesh_free(mesh);
-        (status, message)
-    };
+    let (status, message) = new_shell_status(&positions, &TETRA_TRIANGLES);
     assert_eq!(status, SoftshellStatus::InvalidMesh, "accepted ({message})");
     assert!(message.contains("across") && message.contains("scale the mesh down"), "{message}");
 }
@@ -123,16 +129,7 @@ fn a_component_wound_inward_is_refused_even_beside_an_outward_one() {
     positions.extend(TETRA_POSITIONS.iter().map(|c| c * 0.5 + 5.0));
     let mut triangles = TETRA_TRIANGLES.to_vec();
     triangles.extend(TETRA_TRIANGLES.chunks(3).flat_map(|t| [t[0] + 4, t[2] + 4, t[1] + 4]));
-    let mesh = mesh_from(&positions, &triangles).unwrap();
-    let mut shell = null_mut();
-    // SAFETY: live mesh, valid def; a shell made by mistake is freed.
-    let (status, message) = unsafe {
-        let status = softshell_shell_new(mesh, &softshell_shell_def_default(), &mut shell);
-        let message = last_error();
-        softshell_shell_free(shell);
-        softshell_mesh_free(mesh);
-        (status, message)
-    };
+    let (status, message) = new_shell_status(&positions, &triangles);
     assert_eq!(status, SoftshellStatus::InvalidMesh, "accepted ({message})");
     assert!(message.contains("every closed piece wound outward") && message.contains("triangle 4"), "{message}");
 }
