@@ -564,7 +564,8 @@ struct SoftshellBodyDef softshell_body_def_default(void);
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL pointer, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
 // for a def not made by `softshell_body_def_default` or a field out of range (the message names
 // it), `SOFTSHELL_STATUS_INVALID_MESH` when the mesh does not suit (with gas: not closed,
-// manifold and outward, every connected piece on its own; always: a triangle with a repeated corner or an edge of zero length),
+// manifold and outward, every connected piece on its own; always: a triangle with a repeated
+// corner or an edge of zero length),
 // `SOFTSHELL_STATUS_UNSUPPORTED` when built without the `body` feature. On success
 // `*out_body` receives a new handle to free with `softshell_body_free`; on failure it is left
 // unchanged.
@@ -1095,8 +1096,9 @@ SoftshellStatus softshell_mesh_copy_triangles(const struct SoftshellMesh *mesh,
 // (cotangent Laplacian over the mixed Voronoi area) or `SOFTSHELL_CURVATURE_GAUSSIAN` (angle
 // defect over the same area; boundary vertices use pi instead of 2 pi). Degenerate triangles
 // (twice the area at most 1e-9 of the longest side squared) count for nothing, vertices without
-// area get 0, and a value beyond the float range is saturated at +-FLT_MAX. Any other `kind` is `SOFTSHELL_STATUS_INVALID_ARGUMENT`. Buffer rules as
-// `softshell_mesh_copy_positions` (one float per vertex).
+// area get 0, and a value beyond the float range is saturated at +-FLT_MAX. Any other `kind` is
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT`. Buffer rules as `softshell_mesh_copy_positions` (one
+// float per vertex).
 //
 // # Safety
 // As `softshell_mesh_copy_positions`.

@@ -320,7 +320,8 @@ fn settings_of(def: &SoftshellBodyDef) -> BodySettings {
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL pointer, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
 /// for a def not made by `softshell_body_def_default` or a field out of range (the message names
 /// it), `SOFTSHELL_STATUS_INVALID_MESH` when the mesh does not suit (with gas: not closed,
-/// manifold and outward, every connected piece on its own; always: a triangle with a repeated corner or an edge of zero length),
+/// manifold and outward, every connected piece on its own; always: a triangle with a repeated
+/// corner or an edge of zero length),
 /// `SOFTSHELL_STATUS_UNSUPPORTED` when built without the `body` feature. On success
 /// `*out_body` receives a new handle to free with `softshell_body_free`; on failure it is left
 /// unchanged.

@@ -385,8 +385,9 @@ pub unsafe extern "C" fn softshell_mesh_copy_triangles(
 /// (cotangent Laplacian over the mixed Voronoi area) or `SOFTSHELL_CURVATURE_GAUSSIAN` (angle
 /// defect over the same area; boundary vertices use pi instead of 2 pi). Degenerate triangles
 /// (twice the area at most 1e-9 of the longest side squared) count for nothing, vertices without
-/// area get 0, and a value beyond the float range is saturated at +-FLT_MAX. Any other `kind` is `SOFTSHELL_STATUS_INVALID_ARGUMENT`. Buffer rules as
-/// `softshell_mesh_copy_positions` (one float per vertex).
+/// area get 0, and a value beyond the float range is saturated at +-FLT_MAX. Any other `kind` is
+/// `SOFTSHELL_STATUS_INVALID_ARGUMENT`. Buffer rules as `softshell_mesh_copy_positions` (one
+/// float per vertex).
 ///
 /// # Safety
 /// As `softshell_mesh_copy_positions`.
