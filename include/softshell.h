@@ -337,8 +337,9 @@ typedef struct SoftshellLatticeDef {
   // Rest distance between neighbouring particles, m, > 0. Default 0.05.
   float spacing;
   // Region half-width w >= 1: each particle's region is the (2w+1) x (2w+1) box of lattice
-  // sites around it (clipped by the border and the mask). Larger w = stiffer; the cost of a
-  // step does not grow with w. Default 2.
+  // sites around it (clipped by the border and the mask). Larger w = stiffer; the work of a
+  // step does not grow with w (at most 1.5x that of w = 1, by construction; regions wider than
+  // an eighth of the rows leave fewer blocks of rows to share among threads). Default 2.
   uint32_t region_half_width;
   // alpha in (0, 1]: how hard particles are pulled to their goals each step (1 = all the way).
   // Default 0.5.

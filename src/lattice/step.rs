@@ -28,7 +28,7 @@ use super::matching::{
 };
 use super::params::LatticeParams;
 use super::simulator::{Lattice, StepStats};
-use super::summation::{ROW_BLOCK, RowWindow, add_row, running_sum_row, shift_rows};
+use super::summation::{RowWindow, add_row, row_block, running_sum_row, shift_rows};
 use crate::error::{Error, ErrorKind, Result};
 use crate::parallel::WorkerPool;
 
@@ -110,9 +110,10 @@ impl<'a> Passes<'a> {
         let stride = columns * mc;
         let spacing_sq = self.layout.spacing() * self.layout.spacing();
         let cap = ring_rows(w, rows);
+        let block_rows = row_block(w, rows);
         let mut blocks: Vec<FitBlock> = spread
-            .chunks_mut(ROW_BLOCK * columns * fc)
-            .zip(rotation_out.chunks_mut(ROW_BLOCK * columns))
+            .chunks_mut(block_rows * columns * fc)
+            .zip(rotation_out.chunks_mut(block_rows * columns))
             .enumerate()
             .map(|(i, (f, r))| (i, f, r))
             .collect();
@@ -127,8 +128,8 @@ impl<'a> Passes<'a> {
             let mut q = vec![0.0; stride];
             let mut acc = vec![0.0; stride];
             for (index, spread, rotation_out) in block.iter_mut() {
-                let k0 = *index * ROW_BLOCK;
-                let k1 = (k0 + ROW_BLOCK).min(rows);
+                let k0 = *index * block_rows;
+                let k1 = (k0 + block_rows).min(rows);
                 ring.resize(cap * stride, 0.0);
                 let slot = |j: usize| (j % cap) * stride..(j % cap + 1) * stride;
                 acc.fill(0.0);
@@ -233,10 +234,11 @@ impl Lattice {
         let (x, v) = (&self.x, &self.v);
         let pinned = self.pinned.as_deref();
         let force = self.force.as_deref();
+        let block_rows = row_block(passes.w, rows);
         let mut blocks: Vec<UpdateBlock> = self
             .x_next
-            .chunks_mut(ROW_BLOCK * columns)
-            .zip(self.v_next.chunks_mut(ROW_BLOCK * columns))
+            .chunks_mut(block_rows * columns)
+            .zip(self.v_next.chunks_mut(block_rows * columns))
             .enumerate()
             .map(|(index, (x, v))| UpdateBlock {
                 index,
@@ -251,9 +253,9 @@ impl Lattice {
         let passes = &passes;
         self.pool.for_each_chunk_mut(&mut blocks, 1, |_, block| {
             for b in block.iter_mut() {
-                let k0 = b.index * ROW_BLOCK;
+                let k0 = b.index * block_rows;
                 let mut window = RowWindow::new(spread, columns * fc, rows, passes.w, k0);
-                for k in k0..(k0 + ROW_BLOCK).min(rows) {
+                for k in k0..(k0 + block_rows).min(rows) {
                     let sums_row = window.current();
                     for c in 0..columns {
                         let s = k * columns + c;
@@ -366,9 +368,10 @@ impl Lattice {
         let mut spread = vec![0.0; n * fc];
         passes.fit(&self.pool, &self.x, &self.v, &self.rotation, &mut rings, &mut spread, &mut rotation_out);
         let mut goals = vec![[0.0; 3]; n];
-        for k0 in (0..rows).step_by(ROW_BLOCK) {
+        let block_rows = row_block(passes.w, rows);
+        for k0 in (0..rows).step_by(block_rows) {
             let mut window = RowWindow::new(&spread, columns * fc, rows, passes.w, k0);
-            for k in k0..(k0 + ROW_BLOCK).min(rows) {
+            for k in k0..(k0 + block_rows).min(rows) {
                 for c in 0..columns {
                     let s = k * columns + c;
                     let rest = &passes.rest[s];

@@ -11,10 +11,20 @@
 //! again, and f64 keeps that drift orders of magnitude below anything f32 positions can show.
 //! [`box_sum_naive`] is the O(n w^2) definition, kept as the reference the tests compare with.
 
-/// Rows are processed in blocks of this many: the z running sum restarts at each block, so blocks
-/// are independent units of parallel work. Fixed (never derived from the thread count), so results
-/// are bit-identical whatever the number of threads.
+/// Rows are processed in blocks of at least this many: the z running sum restarts at each block,
+/// so blocks are independent units of parallel work. Never derived from the thread count, so
+/// results are bit-identical whatever the number of threads.
 pub(crate) const ROW_BLOCK: usize = 32;
+
+/// Rows per block for half-width `w`: [`ROW_BLOCK`], or `4w + 2` when that is more. A block's
+/// start sums the `2w + 1` rows of its first window (and the fit recomputes the moments of the
+/// `2w` rows around it), so with blocks of 32 rows a step cost `1 + 2w/32` times the O(n) work:
+/// 2.5x w = 1 at w = 128 on a 256 x 256 lattice (a review). Blocks of at least `4w + 2` rows bound
+/// that overhead by 1.5x whatever w is (at the price of fewer blocks to share among threads when
+/// the regions are as wide as the lattice).
+pub(crate) fn row_block(w: usize, rows: usize) -> usize {
+    ROW_BLOCK.max(w.saturating_mul(4).saturating_add(2).min(rows.max(1)))
+}
 
 /// Running sum along one row: `out[i] = sum_{j=i-w}^{i+w} q[j]` clipped to the row, for each of
 /// the `ch` channels. `q` and `out` hold `columns * ch` values.
@@ -158,7 +168,7 @@ impl<'a> RowWindow<'a> {
 }
 
 /// Fast box sum of a whole grid (serial), with exactly the blocking the step uses: x pass, then
-/// the z window restarted every [`ROW_BLOCK`] rows.
+/// the z window restarted every [`row_block`] rows.
 pub(crate) fn box_sum(src: &[f64], columns: usize, rows: usize, ch: usize, w: usize) -> Vec<f64> {
     let stride = columns * ch;
     let mut bx = vec![0.0; src.len()];
@@ -166,9 +176,10 @@ pub(crate) fn box_sum(src: &[f64], columns: usize, rows: usize, ch: usize, w: us
         running_sum_row(q, out, ch, w);
     }
     let mut out = vec![0.0; src.len()];
-    for k0 in (0..rows).step_by(ROW_BLOCK) {
+    let block = row_block(w, rows);
+    for k0 in (0..rows).step_by(block) {
         let mut window = RowWindow::new(&bx, stride, rows, w, k0);
-        for k in k0..(k0 + ROW_BLOCK).min(rows) {
+        for k in k0..(k0 + block).min(rows) {
             out[k * stride..(k + 1) * stride].copy_from_slice(window.current());
             window.advance();
         }
@@ -243,6 +254,21 @@ mod tests {
         let ones: Vec<f64> = (0..columns * rows).map(|_| if rng.next() < 0.7 { 1.0 } else { 0.0 }).collect();
         for w in [1, 4, 9] {
             assert_eq!(box_sum(&ones, columns, rows, 1, w), box_sum_naive(&ones, columns, rows, 1, w));
+        }
+    }
+
+    /// The blocks are long enough that restarting the running sums at each one costs at most
+    /// half again the O(n) work, whatever w: a block of b rows adds the 2w rows around it.
+    #[test]
+    fn block_restarts_cost_at_most_half_again() {
+        for rows in [1usize, 7, 32, 100, 256, 10_000] {
+            for w in (0..3000).chain([usize::MAX / 2, usize::MAX]) {
+                let b = row_block(w, rows);
+                assert!(b >= ROW_BLOCK, "rows {rows} w {w}: {b}");
+                if b < rows {
+                    assert!((b as f64 + 2.0 * w as f64) / b as f64 <= 1.5, "rows {rows} w {w}: blocks of {b}");
+                }
+            }
         }
     }
 }
