@@ -155,6 +155,8 @@ impl Bendings {
     pub(crate) fn memory_bytes(&self) -> usize {
         vec_bytes(&self.idx)
             + vec_bytes(&self.k)
+            + vec_bytes(&self.wk)
+            + vec_bytes(&self.wk2)
             + vec_bytes(&self.q)
             + vec_bytes(&self.rest_local)
             + vec_bytes(&self.target)
