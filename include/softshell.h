@@ -232,7 +232,7 @@ typedef struct SoftshellBodyDef {
   // `SOFTSHELL_INTEGRATOR_EXPLICIT_EULER` (the paper's) | `_SYMPLECTIC_EULER` |
   // `_IMPLICIT_EULER` (default) | `_XPBD`.
   uint32_t integrator;
-  // Total mass, kg, > 0; spread over the vertices in proportion to their share of the area.
+  // Total mass, kg, in [1e-12, 1e12]; spread over the vertices in proportion to their share of the area.
   // Default 1.
   float total_mass;
   // Spring stiffness K_s, N/m, in [0, 1e12]: one spring per mesh edge. Default 1000.
@@ -243,9 +243,9 @@ typedef struct SoftshellBodyDef {
   // open meshes (cloth) are allowed. With gas the mesh must be closed, manifold and outward
   // (every connected piece).
   float gas_amount;
-  // Gravity, m/s^2. Default 0, -9.81, 0.
+  // Gravity, m/s^2, each component in [-1e6, 1e6]. Default 0, -9.81, 0.
   float gravity[3];
-  // Wind velocity, m/s. Default 0, 0, 0.
+  // Wind velocity, m/s, each component in [-1e6, 1e6]. Default 0, 0, 0.
   float wind[3];
   // Wind drag coefficient, kg/(m^2 s): each face feels `drag ((wind - v)·n) n area`, in
   // [0, 1e6]. Default 0 (no wind force). Over a (sub)step of length h a vertex of mass m
@@ -265,7 +265,7 @@ typedef struct SoftshellBodyDef {
   // A ground plane y = ground_height (normal +y); free vertices below it when the body is made
   // start on it (`softshell_body_new` refuses a mesh entirely below it). Default false.
   bool ground;
-  // Height of the ground plane, m. Default 0.
+  // Height of the ground plane, m, in [-1e9, 1e9]. Default 0.
   float ground_height;
   // Restitution of contacts with the ground and obstacles, in [0, 1]. Default 0.
   float restitution;
@@ -334,7 +334,7 @@ typedef struct SoftshellLatticeDef {
   // takes about 320 bytes per site (370 with region damping), holes included, plus
   // `(2w + 2) * columns` sites' worth of scratch per thread.
   uint32_t rows;
-  // Rest distance between neighbouring particles, m, > 0. Default 0.05.
+  // Rest distance between neighbouring particles, m, in (0, 1e6]. Default 0.05.
   float spacing;
   // Region half-width w >= 1: each particle's region is the (2w+1) x (2w+1) box of lattice
   // sites around it (clipped by the border and the mask). Larger w = stiffer; the work of a
@@ -350,7 +350,7 @@ typedef struct SoftshellLatticeDef {
   float damping;
   // Time step, s, in (0, 1]. Default 1/60.
   float time_step;
-  // Mass of each particle, kg, > 0. Default 0.01.
+  // Mass of each particle, kg, in (0, 1e12]. Default 0.01.
   float particle_mass;
   // Gravity, m/s^2, finite. Default (0, -9.81, 0).
   float gravity[3];
@@ -470,8 +470,8 @@ typedef struct SoftshellShellDef {
   // process, and this removes the elastic rebound from the sudden pressure load (the default
   // sphere's volume then falls monotonically).
   float damping;
-  // The shell is finished (later steps do nothing) when V/V0 falls below this, in [0, 1);
-  // 0 = never. Default 0.3.
+  // The shell is finished (later steps do nothing) when V/V0 falls below this, in
+  // [0, 0.999999]; 0 = never. Default 0.3.
   float stop_volume_ratio;
   // Self-collision (continuous collision detection). Default true. Each substep finds the
   // vertex-face and edge-edge pairs that come within `collision_thickness` over the substep
@@ -677,11 +677,14 @@ size_t softshell_body_triangle_count(const struct SoftshellBody *body);
 // `body` must be NULL or a live body.
 size_t softshell_body_fragment_count(const struct SoftshellBody *body);
 
-// Heap bytes held by the body (positions, springs, gas and fracture bookkeeping, scratch);
-// nothing is held for gas without gas, nor for fracture while both break limits are 0 and no
-// edge was broken by hand. A body with a break limit holds its fracture buffers from the start,
-// with room for an eighth more vertices, edges and faces, so that a step that cracks within
-// that room allocates no large array. 0 for NULL.
+// Heap bytes held by the body (positions, springs, gas and fracture bookkeeping, scratch; the
+// worker threads and the thread pool's own bookkeeping, inside rayon, excluded); nothing is
+// held for gas without gas, nor for fracture while both break limits are 0 and no edge was
+// broken by hand. A body with a break limit holds its vertex and topology buffers from the
+// start, with room for an eighth more vertices, edges and faces, so that the topology update
+// of a step that cracks within that room allocates no large array; the springs, the gas and
+// the solver's per-vertex buffers are still rebuilt or grown after a crack, so the figure can
+// rise then. 0 for NULL.
 //
 // # Safety
 // `body` must be NULL or a live body.
@@ -923,7 +926,8 @@ size_t softshell_lattice_particle_count(const struct SoftshellLattice *lattice);
 // `lattice` must be NULL or a live lattice.
 size_t softshell_lattice_triangle_count(const struct SoftshellLattice *lattice);
 
-// Heap bytes the lattice holds (its worker threads' stacks excluded); 0 for NULL. Storage for
+// Heap bytes the lattice holds (the worker threads and the thread pool's own bookkeeping, inside
+// rayon, excluded); 0 for NULL. Storage for
 // region damping, pins and forces exists only when they are used.
 //
 // # Safety
@@ -1240,7 +1244,8 @@ SoftshellStatus softshell_shell_copy_vertex_curvature(const struct SoftshellShel
                                                       size_t capacity,
                                                       size_t *out_len);
 
-// Bytes held by the shell: its handle, rest data, state, scratch and worker pool bookkeeping.
+// Bytes held by the shell: its handle, rest data, state and scratch (the worker threads and the
+// thread pool's own bookkeeping, inside rayon, excluded; the collision BVHs' size is estimated).
 // Only what the scene uses is allocated: no bending data with `SOFTSHELL_BENDING_NONE`, no
 // anisotropy data before a region is added, no multipliers with the PBD solver, no pool with
 // `threads = 1`. 0 for NULL.

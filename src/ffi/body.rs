@@ -52,7 +52,7 @@ pub struct SoftshellBodyDef {
     /// `SOFTSHELL_INTEGRATOR_EXPLICIT_EULER` (the paper's) | `_SYMPLECTIC_EULER` |
     /// `_IMPLICIT_EULER` (default) | `_XPBD`.
     pub integrator: u32,
-    /// Total mass, kg, > 0; spread over the vertices in proportion to their share of the area.
+    /// Total mass, kg, in [1e-12, 1e12]; spread over the vertices in proportion to their share of the area.
     /// Default 1.
     pub total_mass: f32,
     /// Spring stiffness K_s, N/m, in [0, 1e12]: one spring per mesh edge. Default 1000.
@@ -63,9 +63,9 @@ pub struct SoftshellBodyDef {
     /// open meshes (cloth) are allowed. With gas the mesh must be closed, manifold and outward
     /// (every connected piece).
     pub gas_amount: f32,
-    /// Gravity, m/s^2. Default 0, -9.81, 0.
+    /// Gravity, m/s^2, each component in [-1e6, 1e6]. Default 0, -9.81, 0.
     pub gravity: [f32; 3],
-    /// Wind velocity, m/s. Default 0, 0, 0.
+    /// Wind velocity, m/s, each component in [-1e6, 1e6]. Default 0, 0, 0.
     pub wind: [f32; 3],
     /// Wind drag coefficient, kg/(m^2 s): each face feels `drag ((wind - v)·n) n area`, in
     /// [0, 1e6]. Default 0 (no wind force). Over a (sub)step of length h a vertex of mass m
@@ -85,7 +85,7 @@ pub struct SoftshellBodyDef {
     /// A ground plane y = ground_height (normal +y); free vertices below it when the body is made
     /// start on it (`softshell_body_new` refuses a mesh entirely below it). Default false.
     pub ground: bool,
-    /// Height of the ground plane, m. Default 0.
+    /// Height of the ground plane, m, in [-1e9, 1e9]. Default 0.
     pub ground_height: f32,
     /// Restitution of contacts with the ground and obstacles, in [0, 1]. Default 0.
     pub restitution: f32,
@@ -614,11 +614,14 @@ pub unsafe extern "C" fn softshell_body_fragment_count(body: *const SoftshellBod
     body_getter!("softshell_body_fragment_count", body, |b| b.fragment_count())
 }
 
-/// Heap bytes held by the body (positions, springs, gas and fracture bookkeeping, scratch);
-/// nothing is held for gas without gas, nor for fracture while both break limits are 0 and no
-/// edge was broken by hand. A body with a break limit holds its fracture buffers from the start,
-/// with room for an eighth more vertices, edges and faces, so that a step that cracks within
-/// that room allocates no large array. 0 for NULL.
+/// Heap bytes held by the body (positions, springs, gas and fracture bookkeeping, scratch; the
+/// worker threads and the thread pool's own bookkeeping, inside rayon, excluded); nothing is
+/// held for gas without gas, nor for fracture while both break limits are 0 and no edge was
+/// broken by hand. A body with a break limit holds its vertex and topology buffers from the
+/// start, with room for an eighth more vertices, edges and faces, so that the topology update
+/// of a step that cracks within that room allocates no large array; the springs, the gas and
+/// the solver's per-vertex buffers are still rebuilt or grown after a crack, so the figure can
+/// rise then. 0 for NULL.
 ///
 /// # Safety
 /// `body` must be NULL or a live body.

@@ -30,7 +30,7 @@ pub struct SoftshellLatticeDef {
     /// takes about 320 bytes per site (370 with region damping), holes included, plus
     /// `(2w + 2) * columns` sites' worth of scratch per thread.
     pub rows: u32,
-    /// Rest distance between neighbouring particles, m, > 0. Default 0.05.
+    /// Rest distance between neighbouring particles, m, in (0, 1e6]. Default 0.05.
     pub spacing: f32,
     /// Region half-width w >= 1: each particle's region is the (2w+1) x (2w+1) box of lattice
     /// sites around it (clipped by the border and the mask). Larger w = stiffer; the work of a
@@ -46,7 +46,7 @@ pub struct SoftshellLatticeDef {
     pub damping: f32,
     /// Time step, s, in (0, 1]. Default 1/60.
     pub time_step: f32,
-    /// Mass of each particle, kg, > 0. Default 0.01.
+    /// Mass of each particle, kg, in (0, 1e12]. Default 0.01.
     pub particle_mass: f32,
     /// Gravity, m/s^2, finite. Default (0, -9.81, 0).
     pub gravity: [f32; 3],
@@ -412,7 +412,8 @@ pub unsafe extern "C" fn softshell_lattice_triangle_count(lattice: *const Softsh
     read_count(lattice, "softshell_lattice_triangle_count", |l| l.layout().triangle_count())
 }
 
-/// Heap bytes the lattice holds (its worker threads' stacks excluded); 0 for NULL. Storage for
+/// Heap bytes the lattice holds (the worker threads and the thread pool's own bookkeeping, inside
+/// rayon, excluded); 0 for NULL. Storage for
 /// region damping, pins and forces exists only when they are used.
 ///
 /// # Safety

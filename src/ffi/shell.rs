@@ -101,8 +101,8 @@ pub struct SoftshellShellDef {
     /// process, and this removes the elastic rebound from the sudden pressure load (the default
     /// sphere's volume then falls monotonically).
     pub damping: f32,
-    /// The shell is finished (later steps do nothing) when V/V0 falls below this, in [0, 1);
-    /// 0 = never. Default 0.3.
+    /// The shell is finished (later steps do nothing) when V/V0 falls below this, in
+    /// [0, 0.999999]; 0 = never. Default 0.3.
     pub stop_volume_ratio: f32,
     /// Self-collision (continuous collision detection). Default true. Each substep finds the
     /// vertex-face and edge-edge pairs that come within `collision_thickness` over the substep
@@ -682,7 +682,8 @@ pub unsafe extern "C" fn softshell_shell_copy_vertex_curvature(
     })
 }
 
-/// Bytes held by the shell: its handle, rest data, state, scratch and worker pool bookkeeping.
+/// Bytes held by the shell: its handle, rest data, state and scratch (the worker threads and the
+/// thread pool's own bookkeeping, inside rayon, excluded; the collision BVHs' size is estimated).
 /// Only what the scene uses is allocated: no bending data with `SOFTSHELL_BENDING_NONE`, no
 /// anisotropy data before a region is added, no multipliers with the PBD solver, no pool with
 /// `threads = 1`. 0 for NULL.
