@@ -1130,7 +1130,9 @@ const char *softshell_status_name(uint32_t status);
 // A NUL-terminated, human-readable message about the last call that failed on the calling
 // thread: which argument, index or value was wrong and what to do instead. "" if no call has
 // failed on this thread. Successful calls leave it unchanged. Owned by the library: do not free
-// it; it stays valid until the next call into the library on the same thread. Never NULL.
+// it; it stays valid until the next call on the same thread that fails (so
+// `softshell_status_name`, the version functions and successful calls may come in between, in
+// any order of evaluation). Never NULL.
 const char *softshell_last_error(void);
 
 // The default shell settings (see each field of `SoftshellShellDef`).

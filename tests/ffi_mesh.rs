@@ -458,6 +458,29 @@ fn last_error_is_per_thread_and_empty_at_first() {
     std::thread::spawn(|| assert_eq!(last_error(), "", "another thread's failure must not show here")).join().unwrap();
 }
 
+/// The message pointer stays valid, and its text unchanged, across calls that do not fail: a
+/// C `fprintf(..., softshell_status_name(s), softshell_last_error())` may evaluate either first.
+#[test]
+fn the_last_error_survives_calls_that_do_not_fail() {
+    std::thread::spawn(|| {
+        let _ = mesh_from(&[], &[]);
+        let pointer = softshell_last_error();
+        // SAFETY: never NULL, NUL-terminated.
+        let text = unsafe { CStr::from_ptr(pointer) }.to_owned();
+        let _ = softshell_status_name(SoftshellStatus::InvalidMesh as u32);
+        let _ = (softshell_abi_version(), softshell_version_string());
+        let mesh = mesh_from(&TETRA_POSITIONS, &TETRA_TRIANGLES).unwrap();
+        let _ = report(mesh);
+        // SAFETY: made above.
+        unsafe { softshell_mesh_free(mesh) };
+        assert_eq!(softshell_last_error(), pointer);
+        // SAFETY: the same pointer, still valid.
+        assert_eq!(unsafe { CStr::from_ptr(pointer) }, text.as_c_str());
+    })
+    .join()
+    .unwrap();
+}
+
 #[test]
 fn ply_output_carries_both_curvatures_and_colours() {
     let (p, t) = cube();

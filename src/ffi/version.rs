@@ -55,7 +55,9 @@ pub extern "C" fn softshell_status_name(status: u32) -> *const c_char {
 /// A NUL-terminated, human-readable message about the last call that failed on the calling
 /// thread: which argument, index or value was wrong and what to do instead. "" if no call has
 /// failed on this thread. Successful calls leave it unchanged. Owned by the library: do not free
-/// it; it stays valid until the next call into the library on the same thread. Never NULL.
+/// it; it stays valid until the next call on the same thread that fails (so
+/// `softshell_status_name`, the version functions and successful calls may come in between, in
+/// any order of evaluation). Never NULL.
 #[unsafe(no_mangle)]
 pub extern "C" fn softshell_last_error() -> *const c_char {
     value_call("softshell_last_error", c"".as_ptr(), last_error_ptr)
