@@ -9,7 +9,8 @@
  *   -r RATIO     stop when the volume ratio V/V0 falls below RATIO (default 0.5)
  *   -e EVERY     frame and table interval in steps (default 10)
  *   -t THREADS   worker threads, 0 = all cores (default 1)
- *   -p PRESSURE  outside pressure in Pa (default: the library's)
+ *   -p PRESSURE  outside pressure in Pa, negative inflates (default: the library's)
+ *   -c 0|1       self-collision off (default) or on
  *
  * Exit status 0 on success, 1 on any error (the library's message is printed). */
 #define _POSIX_C_SOURCE 200809L
@@ -28,8 +29,27 @@ static int fail(const char *what, SoftshellStatus status) {
 }
 
 static int usage(const char *argv0) {
-  fprintf(stderr, "usage: %s [-o DIR] [-n STEPS] [-r RATIO] [-e EVERY] [-t THREADS] [-p PRESSURE] [mesh.obj]\n",
+  fprintf(stderr, "usage: %s [-o DIR] [-n STEPS] [-r RATIO] [-e EVERY] [-t THREADS] [-p PRESSURE] [-c 0|1] [mesh.obj]\n",
           argv0);
+  return 1;
+}
+
+/* A whole number >= minimum, all of `text`; 0 when it is not one. */
+static int parse_count(const char *text, unsigned long minimum, unsigned long *out) {
+  char *end = NULL;
+  errno = 0;
+  unsigned long value = strtoul(text, &end, 10);
+  if (errno != 0 || end == text || *end != '\0' || text[0] == '-' || value < minimum) return 0;
+  *out = value;
+  return 1;
+}
+
+/* A number, all of `text` (NaN and infinities are passed on: the library says what it accepts). */
+static int parse_number(const char *text, double *out) {
+  char *end = NULL;
+  double value = strtod(text, &end);
+  if (end == text || *end != '\0') return 0;
+  *out = value;
   return 1;
 }
 
@@ -49,28 +69,33 @@ static SoftshellStatus write_frame(const char *dir, unsigned long step, const fl
 int main(int argc, char **argv) {
   const char *path = "data/kitten.obj";
   const char *dir = NULL;
-  unsigned long max_steps = 300, every = 10;
+  unsigned long max_steps = 300, every = 10, threads = 1, collisions = 0;
   double stop_ratio = 0.5;
-  unsigned threads = 1;
-  double pressure = -1.0;
+  double pressure = 0.0;
+  int pressure_given = 0;
   for (int i = 1; i < argc; i++) {
     if (argv[i][0] == '-' && argv[i][1] != '\0' && argv[i][2] == '\0') {
       if (i + 1 >= argc) return usage(argv[0]);
       const char *value = argv[++i];
+      int ok = 1;
       switch (argv[i - 1][1]) {
         case 'o': dir = value; break;
-        case 'n': max_steps = strtoul(value, NULL, 10); break;
-        case 'r': stop_ratio = atof(value); break;
-        case 'e': every = strtoul(value, NULL, 10); break;
-        case 't': threads = (unsigned)strtoul(value, NULL, 10); break;
-        case 'p': pressure = atof(value); break;
+        case 'n': ok = parse_count(value, 1, &max_steps); break;
+        case 'r': ok = parse_number(value, &stop_ratio); break;
+        case 'e': ok = parse_count(value, 1, &every); break;
+        case 't': ok = parse_count(value, 0, &threads) && threads <= 0xFFFFFFFFul; break;
+        case 'p': ok = pressure_given = parse_number(value, &pressure); break;
+        case 'c': ok = parse_count(value, 0, &collisions) && collisions <= 1; break;
         default: return usage(argv[0]);
+      }
+      if (!ok) {
+        fprintf(stderr, "%s: bad value '%s' for %s\n", argv[0], value, argv[i - 1]);
+        return usage(argv[0]);
       }
     } else {
       path = argv[i];
     }
   }
-  if (every == 0) every = 1;
 
   /* Load, then scale to a unit bounding-box diagonal about the box centre. */
   SoftshellMesh *loaded = NULL;
@@ -100,6 +125,10 @@ int main(int argc, char **argv) {
   }
   double diagonal = 0.0;
   for (int k = 0; k < 3; k++) diagonal += (double)(report.bbox_max[k] - report.bbox_min[k]) * (report.bbox_max[k] - report.bbox_min[k]);
+  if (!(diagonal > 0.0)) {
+    fprintf(stderr, "%s: the mesh has no extent (all its vertices coincide)\n", path);
+    goto done;
+  }
   float inv = (float)(1.0 / sqrt(diagonal));
   for (size_t v = 0; v < vertex_count; v++)
     for (int k = 0; k < 3; k++)
@@ -112,9 +141,11 @@ int main(int argc, char **argv) {
 
   SoftshellShellDef def = softshell_shell_def_default();
   def.stop_volume_ratio = (float)stop_ratio;
-  def.threads = threads;
-  def.collisions = false; /* the collision stage is not available yet */
-  if (pressure >= 0.0) def.pressure = (float)pressure;
+  def.threads = (uint32_t)threads;
+  /* Off by default: a contracting shell at these settings does not reach itself, and the demo
+     runs faster without the stage (-c 1 turns it on). */
+  def.collisions = collisions != 0;
+  if (pressure_given) def.pressure = (float)pressure;
   if ((status = softshell_shell_new(mesh, &def, &shell)) != SOFTSHELL_STATUS_OK) {
     code = fail("softshell_shell_new", status);
     goto done;
@@ -140,7 +171,7 @@ int main(int argc, char **argv) {
   }
 
   printf("%s: %zu vertices, %zu triangles, scaled to a unit diagonal; pressure %g Pa, %u iteration(s), %u thread(s)\n",
-         path, vertex_count, triangle_count, (double)def.pressure, def.iterations, threads);
+         path, vertex_count, triangle_count, (double)def.pressure, def.iterations, (unsigned)threads);
   printf("%6s  %8s  %10s  %11s  %11s  %8s\n", "step", "V/V0", "residual", "elastic J", "bending J", "ms/step");
   SoftshellShellStats stats;
   memset(&stats, 0, sizeof stats);
@@ -182,7 +213,11 @@ int main(int argc, char **argv) {
   code = 0;
 
 done:
-  if (csv) fclose(csv);
+  /* A table that could not be written is a failure, not a result. */
+  if (csv && (ferror(csv) | fclose(csv)) != 0 && code == 0) {
+    fprintf(stderr, "writing %s/contract.csv failed: %s\n", dir, strerror(errno));
+    code = 1;
+  }
   softshell_shell_free(shell);
   softshell_mesh_free(mesh);
   softshell_mesh_free(loaded);

@@ -5,6 +5,7 @@
 //   cpp_simulators [file.obj]     (default data/sphere.obj; any closed, outward mesh)
 // Writes c_examples/build/cpp_shell.ply, cpp_body.ply and cpp_sheet.obj (one frame each).
 // Short on purpose: it runs under valgrind in CI.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <exception>
@@ -33,9 +34,10 @@ void shell_contraction(const softshell::Mesh &mesh) {
   SoftshellShellDef def = softshell::shell_def();  // the library's defaults, then edits
   def.stop_volume_ratio = 0.6f;
   softshell::Shell shell(mesh, def);
-  // An anisotropic region on the first tenth of the faces, fibres chosen per face.
+  // An anisotropic region on the first tenth of the faces (at least one), fibres chosen per face.
   std::vector<std::uint32_t> region;
-  for (std::uint32_t f = 0; f < mesh.triangle_count() / 10; ++f) region.push_back(f);
+  const std::size_t region_size = std::max<std::size_t>(1, mesh.triangle_count() / 10);
+  for (std::uint32_t f = 0; f < region_size; ++f) region.push_back(f);
   SoftshellAnisotropyDef fibres = softshell::anisotropy_def();
   fibres.target_stretch = 0.9f;
   shell.add_anisotropic_region(region, fibres);

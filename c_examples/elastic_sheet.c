@@ -43,16 +43,25 @@ static int write_obj(const char *path, const float *positions, size_t float_coun
   return 0;
 }
 
+/* A whole number in [1, 1000000], all of `text`; 0 when it is not one. */
+static int parse_count(const char *text, int *out) {
+  char *end = NULL;
+  errno = 0;
+  long value = strtol(text, &end, 10);
+  if (errno != 0 || end == text || *end != '\0' || value < 1 || value > 1000000) return 0;
+  *out = (int)value;
+  return 1;
+}
+
 int main(int argc, char **argv) {
   if (argc < 2) {
     fprintf(stderr, "usage: %s OUTPUT_DIR [frames] [steps_per_frame]\n", argv[0]);
     return 1;
   }
   const char *dir = argv[1];
-  int frames = argc > 2 ? atoi(argv[2]) : 90;
-  int steps_per_frame = argc > 3 ? atoi(argv[3]) : 2;
-  if (frames < 1 || steps_per_frame < 1) {
-    fprintf(stderr, "frames and steps_per_frame must be at least 1\n");
+  int frames = 90, steps_per_frame = 2;
+  if ((argc > 2 && !parse_count(argv[2], &frames)) || (argc > 3 && !parse_count(argv[3], &steps_per_frame))) {
+    fprintf(stderr, "frames and steps_per_frame must be whole numbers from 1 to 1000000\n");
     return 1;
   }
   if (mkdir(dir, 0777) != 0 && errno != EEXIST) {
@@ -85,8 +94,11 @@ int main(int argc, char **argv) {
 
   /* Buffers: ask for the sizes first (a NULL buffer answers BUFFER_TOO_SMALL with the size). */
   size_t float_count = 0, index_count = 0, written = 0;
-  softshell_lattice_copy_positions(sheet, NULL, 0, &float_count);
-  softshell_lattice_copy_triangles(sheet, NULL, 0, &index_count);
+  if ((status = softshell_lattice_copy_positions(sheet, NULL, 0, &float_count)) != SOFTSHELL_STATUS_BUFFER_TOO_SMALL ||
+      (status = softshell_lattice_copy_triangles(sheet, NULL, 0, &index_count)) != SOFTSHELL_STATUS_BUFFER_TOO_SMALL) {
+    softshell_lattice_free(sheet);
+    return fail("asking for the buffer sizes", status);
+  }
   float *positions = (float *)malloc(float_count * sizeof *positions);
   uint32_t *triangles = (uint32_t *)malloc(index_count * sizeof *triangles);
   if (!positions || !triangles) {

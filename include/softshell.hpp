@@ -73,6 +73,8 @@ std::vector<T> copy_all(Copy &&copy) {
   std::size_t needed = 0;
   SoftshellStatus status = copy(static_cast<T *>(nullptr), std::size_t{0}, &needed);
   if (status != SOFTSHELL_STATUS_BUFFER_TOO_SMALL) check(status);
+  // Nothing to copy (a lattice with no triangles): a NULL buffer would be refused as too small.
+  if (needed == 0) return {};
   std::vector<T> out(needed);
   check(copy(out.data(), out.size(), &needed));
   out.resize(needed);

@@ -397,6 +397,16 @@ class _Functions:
     pass
 
 
+class _U32(ctypes.c_uint32):
+    """A uint32 argument that refuses integers out of range instead of wrapping them."""
+
+    @classmethod
+    def from_param(cls, value):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= int(value) < 2**32:
+            raise ValueError(f"{value!r} is not an integer in [0, 2^32)")
+        return ctypes.c_uint32(int(value))
+
+
 C = _Functions()  # the raw C functions, with argtypes and restype set
 for _name, (_res, _args) in list(_SIGNATURES.items()) + list(_OPTIONAL.items()):
     try:
@@ -406,7 +416,8 @@ for _name, (_res, _args) in list(_SIGNATURES.items()) + list(_OPTIONAL.items()):
             continue
         raise
     _fn.restype = _res
-    _fn.argtypes = _args
+    # Scalar uint32 arguments are range-checked: ctypes alone wraps 2**32 to 0 silently.
+    _fn.argtypes = [_U32 if a is ctypes.c_uint32 else a for a in _args]
     setattr(C, _name[len("softshell_"):], _fn)
 
 ABI_VERSION = (0 << 16) | (1 << 8) | 0  # the header this binding mirrors
@@ -486,6 +497,10 @@ def _copy(fn, handle, dtype, *extra, columns=None):
     status = fn(handle, *extra, None, 0, ctypes.byref(needed))
     if status != STATUS_BUFFER_TOO_SMALL:
         _check(status)
+    if needed.value == 0:
+        # Nothing to copy (a lattice with no triangles): a NULL buffer would be refused as too small.
+        out = np.empty(0, dtype=dtype)
+        return out.reshape(-1, columns) if columns else out
     out = np.empty(needed.value, dtype=dtype)
     ctype = ctypes.c_float if dtype == np.float32 else ctypes.c_uint32
     _check(fn(handle, *extra, _ptr(out, ctype), out.size, ctypes.byref(needed)))
@@ -499,9 +514,14 @@ def _def(factory, base, overrides):
         if not hasattr(d, key) or key == "internal_cookie":
             raise AttributeError(f"{type(d).__name__} has no field `{key}`")
         field = getattr(d, key)
+        kind = dict(d._fields_)[key]
         if isinstance(field, ctypes.Array):
             field[:] = list(value)
         else:
+            if kind is ctypes.c_uint32 and (
+                isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= int(value) < 2**32
+            ):
+                raise ValueError(f"{key}: {value!r} is not an integer in [0, 2^32)")
             setattr(d, key, value)
     return d
 
@@ -524,7 +544,11 @@ def lattice_def(**fields):
 
 
 def _path(path):
-    return os.fsencode(path)
+    encoded = os.fsencode(path)
+    if b"\0" in encoded:
+        # The C side would stop at the NUL and use a shorter path than the one given.
+        raise ValueError(f"embedded null byte in path {path!r}")
+    return encoded
 
 
 # ---------------------------------------------------------------------------------------------

@@ -138,6 +138,33 @@ class Errors(unittest.TestCase):
         with self.assertRaises(ValueError):
             lattice.step()
 
+    def test_integers_out_of_range_are_refused_not_wrapped(self):
+        # ctypes alone wraps 2**32 to 0: pin(2**32, 0) pinned column 0 (a review).
+        lattice = softshell.Lattice(columns=4, rows=3)
+        for column in (2**32, -1, 2**40 + 1):
+            # ctypes reports the converter's ValueError as an ArgumentError naming the argument.
+            with self.assertRaisesRegex(ctypes.ArgumentError, "not an integer in"):
+                lattice.pin(column, 0)
+        with self.assertRaises(ValueError):
+            softshell.shell_def(threads=2**32)
+        self.assertEqual(softshell.shell_def(threads=3).threads, 3)
+
+    def test_a_path_with_a_null_byte_is_refused(self):
+        # The C side would stop at the NUL: save_obj("x.obj\\0.backup") wrote x.obj (a review).
+        positions = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float32)
+        triangles = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]], dtype=np.uint32)
+        mesh = softshell.Mesh.from_arrays(positions, triangles)
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "cut.obj")
+            with self.assertRaises(ValueError):
+                mesh.save_obj(path + "\0.backup")
+            self.assertFalse(os.path.exists(path))
+
+    def test_empty_copies_return_empty_arrays(self):
+        # One row of particles has no triangles: the copy must not pass NULL and fail.
+        lattice = softshell.Lattice(columns=5, rows=1)
+        self.assertEqual(lattice.triangles().shape[0], 0)
+
 
 class Buffers(unittest.TestCase):
     def test_mesh_round_trip(self):
