@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <exception>
+#include <stdexcept>
 #include <vector>
 
 #include "softshell.hpp"
@@ -106,6 +107,12 @@ void lattice_poke() {
   sheet.save_obj("c_examples/build/cpp_sheet.obj");
   std::printf("lattice: %zu particles, %zu triangles, middle at y = %.4f, mean goal distance %.2e m\n",
               sheet.particle_count(), sheet.triangle_count(), positions[3 * middle + 1], stats.goal_distance);
+
+  // A single row of particles has no triangles: the copy is an empty vector, not an error.
+  def.columns = 5;
+  def.rows = 1;
+  softshell::Lattice strip(def);
+  if (!strip.triangles().empty()) throw std::runtime_error("a one-row lattice has no triangles");
 }
 
 void ccd_queries() {
