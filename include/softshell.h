@@ -232,8 +232,8 @@ typedef struct SoftshellBodyDef {
   // `SOFTSHELL_INTEGRATOR_EXPLICIT_EULER` (the paper's) | `_SYMPLECTIC_EULER` |
   // `_IMPLICIT_EULER` (default) | `_XPBD`.
   uint32_t integrator;
-  // Total mass, kg, in [1e-12, 1e12]; spread over the vertices in proportion to their share of the area.
-  // Default 1.
+  // Total mass, kg, in [1e-12, 1e12]; spread over the vertices in proportion to their share of
+  // the area. Default 1.
   float total_mass;
   // Spring stiffness K_s, N/m, in [0, 1e12]: one spring per mesh edge. Default 1000.
   float spring_stiffness;
@@ -927,8 +927,8 @@ size_t softshell_lattice_particle_count(const struct SoftshellLattice *lattice);
 size_t softshell_lattice_triangle_count(const struct SoftshellLattice *lattice);
 
 // Heap bytes the lattice holds (the worker threads and the thread pool's own bookkeeping, inside
-// rayon, excluded); 0 for NULL. Storage for
-// region damping, pins and forces exists only when they are used.
+// rayon, excluded); 0 for NULL. Storage for region damping, pins and forces exists only when
+// they are used.
 //
 // # Safety
 // `lattice` must be NULL or a live lattice.

@@ -52,8 +52,8 @@ pub struct SoftshellBodyDef {
     /// `SOFTSHELL_INTEGRATOR_EXPLICIT_EULER` (the paper's) | `_SYMPLECTIC_EULER` |
     /// `_IMPLICIT_EULER` (default) | `_XPBD`.
     pub integrator: u32,
-    /// Total mass, kg, in [1e-12, 1e12]; spread over the vertices in proportion to their share of the area.
-    /// Default 1.
+    /// Total mass, kg, in [1e-12, 1e12]; spread over the vertices in proportion to their share of
+    /// the area. Default 1.
     pub total_mass: f32,
     /// Spring stiffness K_s, N/m, in [0, 1e12]: one spring per mesh edge. Default 1000.
     pub spring_stiffness: f32,

@@ -413,8 +413,8 @@ pub unsafe extern "C" fn softshell_lattice_triangle_count(lattice: *const Softsh
 }
 
 /// Heap bytes the lattice holds (the worker threads and the thread pool's own bookkeeping, inside
-/// rayon, excluded); 0 for NULL. Storage for
-/// region damping, pins and forces exists only when they are used.
+/// rayon, excluded); 0 for NULL. Storage for region damping, pins and forces exists only when
+/// they are used.
 ///
 /// # Safety
 /// `lattice` must be NULL or a live lattice.
