@@ -311,7 +311,7 @@ fn main() {
         }
     }
     match best {
-        Some(c) => {
+        Some(ref c) => {
             println!(
                 "\ncracking: step {} breaks {} springs in {:.2} ms; the same step without fracture {:.2} ms: \
                  {:.2} x (the plain median step: {:.2} ms, {:.2} x)",
@@ -342,6 +342,87 @@ fn main() {
         }
         None => println!("\ncracking: no spring broke"),
     }
+    // The storm steps against themselves: the same state stepped with and without its fracture
+    // phase (the rows above compare them with a ball that holds, whose solve is another's).
+    if let Some(c) = best {
+        println!("the same storm steps, each against the same state stepped without its fracture phase (median of 3):");
+        for step in c.step + 1..=c.step + c.storm.len() {
+            let mut runs: Vec<SameState> =
+                (0..3).filter_map(|r| same_state_cost(&positions, &triangles, &cracking, step, r % 2 == 1)).collect();
+            if runs.is_empty() {
+                println!("  step {step}: not measured (a step failed)");
+                continue;
+            }
+            runs.sort_by(|a, b| (a.crack / a.same).total_cmp(&(b.crack / b.same)));
+            let m = &runs[runs.len() / 2];
+            println!(
+                "  step {step}: {} springs broken in {:.2} ms; the same step without its fracture phase {:.2} ms \
+                 ({} CG it. in both): {:.2} x",
+                m.broken,
+                m.crack * 1e3,
+                m.same * 1e3,
+                m.iterations,
+                m.crack / m.same
+            );
+        }
+    }
+}
+
+/// One step measured by [`same_state_cost`].
+struct SameState {
+    crack: f64,
+    same: f64,
+    broken: u64,
+    iterations: u64,
+}
+
+/// Two bodies with the `cracking` settings stepped alike up to `step` (the steps are
+/// deterministic: their states are checked equal, bit for bit), then step `step` of one with
+/// its fracture phase and of the other without it, timed (`other_first`: the one without
+/// steps first). None when a step failed or the states differ.
+fn same_state_cost(
+    positions: &[f32],
+    triangles: &[u32],
+    cracking: &SoftshellBodyDef,
+    step: usize,
+    other_first: bool,
+) -> Option<SameState> {
+    let handles = [new_body(positions, triangles, cracking), new_body(positions, triangles, cracking)];
+    // SAFETY: live handles, made above, used only here and freed below.
+    let [a, b] = handles.map(|h| unsafe { &mut *h }.body_mut() as *mut softshell::body::Body);
+    // SAFETY: two distinct live bodies.
+    let (a, b) = unsafe { (&mut *a, &mut *b) };
+    let mut result = None;
+    'measure: {
+        for _ in 0..step {
+            if a.step().is_err() || b.step().is_err() {
+                break 'measure;
+            }
+        }
+        if !a.positions().eq(b.positions()) || !a.velocities().eq(b.velocities()) || !a.triangles().eq(b.triangles()) {
+            eprintln!("same_state_cost: the twin bodies differ at step {step}");
+            break 'measure;
+        }
+        let mut timed_without = || {
+            let started = Instant::now();
+            let stats = b.step_without_fracture();
+            (started.elapsed().as_secs_f64(), stats)
+        };
+        let before = if other_first { Some(timed_without()) } else { None };
+        let started = Instant::now();
+        let with = a.step();
+        let crack = started.elapsed().as_secs_f64();
+        let (same, without) = before.unwrap_or_else(timed_without);
+        if let (Ok(with), Ok(without)) = (with, without) {
+            assert_eq!(with.solver_iterations, without.solver_iterations, "the same solve in both");
+            result = Some(SameState { crack, same, broken: with.springs_broken, iterations: with.solver_iterations });
+        }
+    }
+    // SAFETY: made above, freed once each.
+    unsafe {
+        handles.iter().for_each(|&h| softshell_body_free(h));
+    }
+    result
 }
 
 /// Steps a body with `plain` and one with `cracking` settings in lockstep until the cracking one

@@ -432,3 +432,51 @@ fn a_leak_is_not_taken_for_energy_made_or_lost() {
         }
     }
 }
+
+/// The benchmarks' hook `Body::step_without_fracture` (benches/body_balloon.rs times a cracking
+/// step against the same state stepped without its fracture phase): two bodies stepped alike
+/// stay equal bit for bit; at the first step that cracks one of them, the other, stepped
+/// through the hook, moves exactly the same way but cracks nothing, and its break limit is back
+/// for the next step, which cracks it.
+#[test]
+fn a_step_without_the_fracture_phase_moves_alike_and_cracks_nothing() {
+    let (positions, triangles) = icosphere(3, 1.0);
+    let mut def = softshell_body_def_default();
+    def.gravity = [0.0; 3];
+    def.spring_stiffness = 400.0;
+    def.spring_damping = 2.0;
+    def.gas_amount = 700.0;
+    def.break_strain = 0.12;
+    let (cracking, twin) = (body(&positions, &triangles, &def), body(&positions, &triangles, &def));
+    // SAFETY: a live handle, used only through this reference while it lives.
+    let twin_body = unsafe { &mut *twin.0 }.body_mut();
+    let mut cracked_at = None;
+    for k in 0..200 {
+        let before = snapshot(&twin);
+        let stats = step(&cracking);
+        if stats.springs_broken == 0 {
+            let same = twin_body.step().expect("the twin steps like the body");
+            assert_eq!(same.springs_broken, 0, "step {k}");
+            let (a, b) = (snapshot(&cracking), snapshot(&twin));
+            assert_eq!((a.positions, a.velocities), (b.positions, b.velocities), "step {k}: the twins differ");
+            continue;
+        }
+        let same = twin_body.step_without_fracture().expect("the step without fracture succeeds");
+        let (a, b) = (snapshot(&cracking), snapshot(&twin));
+        assert_eq!(same.springs_broken, 0);
+        assert_eq!(same.solver_iterations, stats.solver_iterations, "the same solve");
+        assert_eq!(b.generation, before.generation, "no topology change without the fracture phase");
+        assert_eq!(b.triangles, before.triangles);
+        // The crack appends vertices and never moves the others.
+        let n = b.positions.len();
+        assert!(a.positions.len() > n, "the crack adds vertices");
+        assert_eq!(a.positions[..n], b.positions[..], "the same motion");
+        assert_eq!(a.velocities[..n], b.velocities[..]);
+        assert_eq!(twin_body.settings().break_strain, 0.12, "the break limit is back");
+        cracked_at = Some(k);
+        break;
+    }
+    let k = cracked_at.expect("the over-inflated ball cracks within 200 steps");
+    let next = step(&twin);
+    assert!(next.springs_broken > 0, "the twin cracks at the step after {k}, its limit restored");
+}

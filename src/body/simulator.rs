@@ -706,6 +706,20 @@ impl Body {
         pool.install(|| self.step_in_pool())
     }
 
+    /// [`Body::step`] without its fracture phase: no spring cracks and no core is released,
+    /// whatever the strains and forces. For benchmarks: two bodies stepped alike up to a step
+    /// that cracks, one of them through this, measure what the fracture phase of that step costs
+    /// against the same step of the same state without it (benches/body_balloon.rs). The break
+    /// limits are back as they were when it returns.
+    #[doc(hidden)]
+    pub fn step_without_fracture(&mut self) -> Result<BodyStats> {
+        let limits = (self.settings.break_strain, self.settings.break_force);
+        (self.settings.break_strain, self.settings.break_force) = (0.0, 0.0);
+        let result = self.step();
+        (self.settings.break_strain, self.settings.break_force) = limits;
+        result
+    }
+
     fn step_in_pool(&mut self) -> Result<BodyStats> {
         let started = Instant::now();
         let substeps = self.settings.substeps.max(1);

@@ -188,6 +188,16 @@ pub struct SoftshellBody {
     poisoned: bool,
 }
 
+#[cfg(feature = "body")]
+impl SoftshellBody {
+    /// The Rust body behind the handle, for the crate's benchmarks (which time what the C ABI
+    /// does not expose, such as a step without its fracture phase); not part of the C ABI.
+    #[doc(hidden)]
+    pub fn body_mut(&mut self) -> &mut Body {
+        &mut self.body
+    }
+}
+
 impl Poisonable for SoftshellBody {
     fn is_poisoned(&self) -> bool {
         self.poisoned
