@@ -299,6 +299,12 @@ impl Topology {
     }
 
     fn build_boundary_loops(&mut self, triangles: &[[u32; 3]]) {
+        self.boundary_loops = self.boundary_loops_of(triangles);
+    }
+
+    /// The boundary loops of [`Topology::boundary_loops`], from the edges and face edges.
+    fn boundary_loops_of(&self, triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
+        let mut loops = Vec::new();
         // Directed boundary half-edges (a -> b as the face runs), keyed by their start vertex.
         let mut outgoing: Vec<(u32, u32)> = Vec::new();
         for (edge, &count) in self.edge_face_count.iter().enumerate() {
@@ -329,8 +335,9 @@ impl Topology {
                 used[offset] = true;
                 next = outgoing[offset].1;
             }
-            self.boundary_loops.push(boundary);
+            loops.push(boundary);
         }
+        loops
     }
 
     fn build_components(&mut self, triangles: &[[u32; 3]], vertex_count: usize) {
