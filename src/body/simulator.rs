@@ -1087,7 +1087,9 @@ impl Body {
             vertices.dedup();
             let mut before = std::mem::take(&mut fracture.before);
             before.clone_from(&self.triangles);
-            if crack::split_fans(fracture, &topology, &mut self.triangles, &mut self.nodes, &vertices) > 0 {
+            if crack::split_fans(fracture, &topology, &mut self.triangles, &mut self.nodes, &vertices, Some(&self.pool))
+                > 0
+            {
                 trace_phase("cracks: split", t);
                 let t = Instant::now();
                 topology.update_with(&before, &self.triangles, self.nodes.len(), &mut fracture.spare, Some(&self.pool));
