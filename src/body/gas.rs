@@ -700,7 +700,8 @@ impl Gas {
             + self.closed_fan.capacity()
             + self.corners.capacity() * std::mem::size_of::<Corner>()
             + self.chunk_six_v.capacity() * 8
-            + self.caps.iter().map(|c| c.ring.capacity() * 4 + std::mem::size_of::<Cap>()).sum::<usize>()
+            + self.caps.capacity() * std::mem::size_of::<Cap>()
+            + self.caps.iter().map(|c| c.ring.capacity() * 4).sum::<usize>()
     }
 }
 

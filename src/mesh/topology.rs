@@ -367,6 +367,7 @@ impl Topology {
             + self.vertex_faces.capacity() * 4
             + self.inconsistent_edges.capacity() * 4
             + self.non_manifold_vertices.capacity() * 4
+            + self.boundary_loops.capacity() * std::mem::size_of::<Vec<u32>>()
             + self.boundary_loops.iter().map(|l| l.capacity() * 4).sum::<usize>()
             + self.face_components.capacity() * 4
     }
