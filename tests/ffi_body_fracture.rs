@@ -448,20 +448,21 @@ fn a_step_without_the_fracture_phase_moves_alike_and_cracks_nothing() {
     def.gas_amount = 700.0;
     def.break_strain = 0.12;
     let (cracking, twin) = (body(&positions, &triangles, &def), body(&positions, &triangles, &def));
-    // SAFETY: a live handle, used only through this reference while it lives.
-    let twin_body = unsafe { &mut *twin.0 }.body_mut();
+    // SAFETY: a live handle; each reference made here ends before the handle is used again
+    // through its raw pointer (snapshot, step).
+    let twin_body = || unsafe { &mut *twin.0 }.body_mut();
     let mut cracked_at = None;
     for k in 0..200 {
         let before = snapshot(&twin);
         let stats = step(&cracking);
         if stats.springs_broken == 0 {
-            let same = twin_body.step().expect("the twin steps like the body");
+            let same = twin_body().step().expect("the twin steps like the body");
             assert_eq!(same.springs_broken, 0, "step {k}");
             let (a, b) = (snapshot(&cracking), snapshot(&twin));
             assert_eq!((a.positions, a.velocities), (b.positions, b.velocities), "step {k}: the twins differ");
             continue;
         }
-        let same = twin_body.step_without_fracture().expect("the step without fracture succeeds");
+        let same = twin_body().step_without_fracture().expect("the step without fracture succeeds");
         let (a, b) = (snapshot(&cracking), snapshot(&twin));
         assert_eq!(same.springs_broken, 0);
         assert_eq!(same.solver_iterations, stats.solver_iterations, "the same solve");
@@ -472,11 +473,37 @@ fn a_step_without_the_fracture_phase_moves_alike_and_cracks_nothing() {
         assert!(a.positions.len() > n, "the crack adds vertices");
         assert_eq!(a.positions[..n], b.positions[..], "the same motion");
         assert_eq!(a.velocities[..n], b.velocities[..]);
-        assert_eq!(twin_body.settings().break_strain, 0.12, "the break limit is back");
+        assert_eq!(twin_body().settings().break_strain, 0.12, "the break limit is back");
         cracked_at = Some(k);
         break;
     }
     let k = cracked_at.expect("the over-inflated ball cracks within 200 steps");
     let next = step(&twin);
     assert!(next.springs_broken > 0, "the twin cracks at the step after {k}, its limit restored");
+}
+
+/// A step without the fracture phase that fails (an explicit step far over its stable
+/// time step) still gives the break limits back.
+#[test]
+fn a_failing_step_without_fracture_gives_the_limits_back() {
+    let (positions, triangles) = icosphere(2, 1.0);
+    let mut def = softshell_body_def_default();
+    def.integrator = SOFTSHELL_INTEGRATOR_EXPLICIT_EULER;
+    def.spring_stiffness = 1e7;
+    def.time_step = 0.1;
+    def.break_strain = 0.5;
+    def.break_force = 3.0;
+    let b = body(&positions, &triangles, &def);
+    // SAFETY: a live handle, not otherwise used while this reference lives.
+    let inner = unsafe { &mut *b.0 }.body_mut();
+    let mut failed = false;
+    for _ in 0..20 {
+        if inner.step_without_fracture().is_err() {
+            failed = true;
+            break;
+        }
+        inner.apply_impulse(0, glam::Vec3::new(1.0, 0.0, 0.0)).ok();
+    }
+    assert!(failed, "the step fails");
+    assert_eq!((inner.settings().break_strain, inner.settings().break_force), (0.5, 3.0));
 }

@@ -568,8 +568,9 @@ mod tests {
             let mut topology = Topology::build(&triangles, vertices as usize);
             // Every other case updates through buffers it keeps, as the fracture does (each
             // update swaps them with the topology's own: stale contents must never leak).
-            // ... half of those with the components found on another thread.
-            let pool = (case % 4 == 0).then(|| crate::parallel::WorkerPool::new(2).unwrap());
+            // ... all of those with a pool of 1, 2 or 3 threads (the components, the fans and the
+            // boundary loops found on other threads).
+            let pool = (case % 2 == 0).then(|| crate::parallel::WorkerPool::new(1 + (case as u32 / 2) % 3).unwrap());
             let mut spare = (case % 2 == 0).then(|| {
                 topology.reserve_headroom(0.1);
                 TopologySpare::for_topology(&topology, 0.1)
