@@ -76,6 +76,8 @@ fn the_shell_reports_every_array_it_holds() {
     }
 }
 
+/// Within 256 bytes (the handle's few small boxes, 64-96 bytes here, are not counted): less than
+/// one byte per vertex of this sphere (482), so a left-out per-vertex array fails.
 #[test]
 fn the_body_reports_what_it_holds_while_stepping() {
     let (p, t) = unit_obj("sphere.obj", 1.0);
@@ -86,7 +88,7 @@ fn the_body_reports_what_it_holds_while_stepping() {
         for step in 0..4 {
             let (reported, held) = (body.memory() as isize, live() - before);
             assert!(
-                (reported - held).abs() <= 1024,
+                (reported - held).abs() <= 256,
                 "gas {} after {step} steps: reports {reported}, holds {held}",
                 def.gas_amount
             );
@@ -117,7 +119,7 @@ fn a_cracking_body_reports_what_it_holds() {
     for step in 0..4 {
         let (reported, held) = (body.memory() as isize, live() - before);
         assert!(
-            (reported - held).abs() <= 1024,
+            (reported - held).abs() <= 256,
             "after {step} steps ({broken} springs broken): reports {reported}, holds {held}"
         );
         broken += body.step().unwrap().springs_broken;
