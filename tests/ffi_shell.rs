@@ -475,3 +475,22 @@ fn a_finished_shell_stops_moving_and_stats_may_be_skipped() {
     assert!(again.finished && again.step == at_stop.step);
     assert_eq!(positions(&shell), frozen);
 }
+
+/// The residual measures how far the iterations got on the constraints they solve: with each
+/// kind of bending it falls as the iterations grow. (With the rest curvature kept, the
+/// default, it was measured against the stencils' frames at the end of the step while the
+/// iterations hold the target of the frames at the substep's start: it stayed at 3.1e-5 from 5
+/// to 1,000 iterations, found in a review.)
+#[test]
+fn the_residual_falls_as_the_iterations_grow_with_every_bending() {
+    let mesh = unit_mesh("sphere.obj", 1.0);
+    for bending in [SOFTSHELL_BENDING_ISOMETRIC_REST, SOFTSHELL_BENDING_ISOMETRIC, SOFTSHELL_BENDING_NONE] {
+        let residual = |iterations: u32| {
+            let def = SoftshellShellDef { bending, iterations, collisions: false, ..softshell_shell_def_default() };
+            let shell = new_shell(&mesh, &def).unwrap();
+            (0..10).map(|_| step(&shell).unwrap().residual).last().unwrap()
+        };
+        let (few, many) = (residual(5), residual(100));
+        assert!(many < 0.2 * few, "bending {bending}: residual {few:.3e} after 5 iterations, {many:.3e} after 100");
+    }
+}

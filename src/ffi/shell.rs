@@ -163,6 +163,8 @@ pub struct SoftshellShellStats {
     /// Largest relative constraint violation after the last iteration, dimensionless: with
     /// XPBD |C + alpha lambda| and with PBD |C|, where C = sqrt(2 W^) is made relative to the
     /// element (divided by sqrt(A0) for membrane and fibre constraints, so it reads like a strain).
+    /// C is that of the constraints the iterations solve: with `SOFTSHELL_BENDING_ISOMETRIC_REST`
+    /// the bending target is the rest curvature as the substep's start orients it.
     pub residual: f64,
     /// Membrane energy, J.
     pub elastic_energy: f64,
