@@ -20,6 +20,7 @@ pub struct Observed<'a> {
     pub body_spring: &'a [Run],
     pub body_gas: &'a [Run],
     pub body_reference: &'a [Run],
+    pub lattice_reference: &'a [Run],
     pub rows: &'a [Row],
     pub figs: &'a FigObs,
 }
@@ -328,11 +329,30 @@ pub fn findings(o: &Observed) -> String {
             ));
         }
     }
-    let contract: Vec<f64> = o.shell_contract.iter().filter_map(|r| r.error).collect();
-    if let Some(min) = contract.iter().copied().min_by(f64::total_cmp) {
+    // How far each reference is from converged, and the rows it cannot resolve.
+    for (scene, runs) in [
+        ("Shell contraction", o.shell_contract),
+        ("Body inflation", o.body_reference),
+        ("Lattice sag", o.lattice_reference),
+    ] {
+        let Some(uncertainty) = runs.iter().find(|r| r.family == "reference check").and_then(|r| r.error) else {
+            continue;
+        };
+        let rows: Vec<&Run> = runs.iter().filter(|r| !r.family.starts_with("reference")).collect();
+        let smallest = rows.iter().filter_map(|r| r.error).min_by(f64::total_cmp).unwrap_or(f64::NAN);
+        let unresolved: Vec<String> = rows
+            .iter()
+            .filter(|r| r.error.is_some_and(|e| e < 2.0 * uncertainty))
+            .map(|r| format!("{} / {}", r.family, r.setting))
+            .collect();
         item(format!(
-            "**Shell contraction floor:** the smallest RMS error against the reference is {min:.2e} \
-             of the diagonal."
+            "**{scene} reference:** its own error (the reference check) is {uncertainty:.2e}; the \
+             smallest error of a row is {smallest:.2e}. {}",
+            if unresolved.is_empty() {
+                "Every row's error is over twice the reference's.".to_string()
+            } else {
+                format!("Within twice the reference's error, so not resolved: {}.", unresolved.join(", "))
+            }
         ));
     }
 

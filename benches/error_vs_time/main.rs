@@ -83,7 +83,7 @@ fn section(md: &mut String, title: &str, error_name: &str, runs: &[Run], svg: Op
 fn plot_families(md: &mut String, scenes: &[(&str, Vec<Run>)], file: &str, caption: &str) {
     let mut all = Vec::new();
     for (prefix, runs) in scenes {
-        for r in runs.iter().filter(|r| r.family != "reference") {
+        for r in runs.iter().filter(|r| !r.family.starts_with("reference")) {
             all.push(Run::new(&format!("{prefix}{}", r.family), r.setting.clone(), r.seconds, r.error, ""));
         }
     }
@@ -170,6 +170,7 @@ fn main() {
         &lattice,
         None,
     );
+    let lattice_runs = lattice.clone();
     plot_families(
         &mut md,
         &[("rigid rotation: ", rigid), ("sag: ", lattice)],
@@ -237,6 +238,7 @@ fn main() {
         body_spring: &spring,
         body_gas: &gas,
         body_reference: &body,
+        lattice_reference: &lattice_runs,
         rows: &rows,
         figs: &figs,
     };
