@@ -148,7 +148,11 @@ fn shell_families() -> Vec<(&'static str, String, SoftshellShellDef)> {
             SoftshellShellDef { time_step: h, ..softshell_shell_def_default() },
         ));
     }
-    for (solver, name) in [(SOFTSHELL_SOLVER_XPBD, "XPBD"), (SOFTSHELL_SOLVER_PBD, "PBD (paper; another model)")] {
+    for (solver, name) in [
+        (SOFTSHELL_SOLVER_XPBD, "XPBD"),
+        (SOFTSHELL_SOLVER_PBD, "PBD (paper; another model)"),
+        (SOFTSHELL_SOLVER_PBD_DISTANCE, "PBD edge distances (baseline; another model)"),
+    ] {
         for it in [5, 20] {
             f.push((
                 "solver form",
