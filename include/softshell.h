@@ -481,6 +481,9 @@ typedef struct SoftshellShellDef {
   // `softshell_shell_memory_bytes`) and the collision stats stay 0.
   bool collisions;
   // Collision thickness delta relative to the bounding-box diagonal, in [0, 1]. Default 1e-4.
+  // With collisions on, it must also stay below the rest distance of every two primitives
+  // that share no vertex (about the edge length over the diagonal on a smooth mesh), or
+  // `softshell_shell_new` refuses it with `SOFTSHELL_STATUS_INVALID_ARGUMENT`.
   float collision_thickness;
   // Worker threads: 0 = one per core, 1 = serial on the caller's thread (default), at most
   // 256. Results are bit-identical whatever the count.
@@ -771,7 +774,8 @@ SoftshellStatus softshell_body_copy_fragment_ids(const struct SoftshellBody *bod
 // the largest displacement of a point, 1e-12 of the points' extent and `thickness` / 64); for
 // the rare queries that use up the fixed work budget it may be earlier. A near miss within
 // that tolerance of `thickness` (or within a few units in the last place of the coordinates),
-// or a query with a coordinate above 2^1000 in magnitude, may be reported as a hit. The time
+// or a query with a coordinate or a `thickness` above 2^1000 in magnitude, may be reported as a
+// hit (at t = 0). The time
 // per call is bounded (about 100 microseconds at worst; typically well under a microsecond).
 //
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` when a pointer is NULL and
@@ -807,7 +811,8 @@ SoftshellStatus softshell_ccd_vertex_triangle(const double *p0,
 // the largest displacement of a point, 1e-12 of the points' extent and `thickness` / 64); for
 // the rare queries that use up the fixed work budget it may be earlier. A near miss within
 // that tolerance of `thickness` (or within a few units in the last place of the coordinates),
-// or a query with a coordinate above 2^1000 in magnitude, may be reported as a hit. The time
+// or a query with a coordinate or a `thickness` above 2^1000 in magnitude, may be reported as a
+// hit (at t = 0). The time
 // per call is bounded (about 100 microseconds at worst; typically well under a microsecond).
 //
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` when a pointer is NULL and
@@ -1148,7 +1153,8 @@ struct SoftshellAnisotropyDef softshell_anisotropy_def_default(void);
 //
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL argument, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
 // for a def not made by `softshell_shell_def_default`, an unknown kind or a field out of range
-// (the message names the field, its value and the valid range), `SOFTSHELL_STATUS_INVALID_MESH`
+// (the message names the field, its value and the valid range) or a `collision_thickness` above
+// the rest distance of two primitives sharing no vertex, `SOFTSHELL_STATUS_INVALID_MESH`
 // for a mesh that is not closed, manifold, consistently oriented with outward normals (every
 // connected piece on its own) and free of degenerate triangles (the message names the first
 // offending edge or triangle), or larger than 1e6 m across (bounding-box diagonal),

@@ -181,13 +181,17 @@ struct LeafLanes {
 /// Bytes of one leaf's lanes (for memory estimates).
 pub(crate) const LEAF_LANES_BYTES: usize = std::mem::size_of::<LeafLanes>();
 
-/// A key as the f32 compared in [`LeafLanes::sharing`]: the same bits, so two keys compare
-/// equal exactly when they are equal, except where the f32 compare differs from the bits': 0
-/// and 2^31 (+0.0 and -0.0), and the NaN patterns (never equal). Keys from 2^31 up therefore
+/// A key as the f32 compared in [`LeafLanes::sharing`]: the bits of a positive normal float
+/// (never a subnormal, which the DAZ mode of a host's MXCSR would compare equal to 0), so two
+/// keys compare equal exactly when they are equal. Keys from 2^30 up
 /// become a NaN, which shares with nothing: a pair is then reported rather than skipped, which
 /// the callers allow (they check what they need), while a skip is never wrong.
 fn key_lane(key: u32) -> f32 {
-    if key < 1 << 31 { f32::from_bits(key) } else { f32::NAN }
+    // Shifted past the subnormals: with the DAZ bit of MXCSR set (hosts built with -ffast-math,
+    // engines that set FTZ/DAZ for speed) every subnormal compares equal to 0 and to each other,
+    // so plain key bits would make every pair "share" a key. Keys 0..2^30 become the positive
+    // normal floats from 2^-126 up (finite, exponent field 0x01..=0x81); larger keys a NaN.
+    if key < 1 << 30 { f32::from_bits(key + 0x0080_0000) } else { f32::NAN }
 }
 
 impl LeafLanes {

@@ -809,6 +809,18 @@ impl SelfContact {
         Some(Contact { idx, g, n, v_before: n.dot(rel) / h })
     }
 
+    /// A pair sharing no vertex that is within `thickness` of each other at rest at `x`, if
+    /// any: (0 = vertex-face, 1 = edge-edge, vertex or first edge, face or second edge). Such a
+    /// pair would be pushed apart by the first step's contact stage whatever the motion.
+    pub fn pair_within_at_rest(&mut self, x: &[Vec3], thickness: f64) -> Option<(u8, u32, u32)> {
+        self.flags.fill(0);
+        self.ensure_pairs(x, x, thickness);
+        self.detect(x, x, thickness, false, &mut ContactCounts::default());
+        let first = self.hits.first().map(|&(kind, i, j, _)| (kind, i, j));
+        self.hits.clear();
+        first
+    }
+
     /// Resolves self-contact over the step `x0 -> p` at contact distance `thickness`: corrects
     /// `p` in place (vertices with inverse mass 0 do not move). `h` is the (sub)step length, for
     /// the velocities of [`SelfContact::limit_velocities`].

@@ -64,7 +64,8 @@ fn write_answer(out_hit: *mut i32, out_toi: *mut f64, toi: Option<f64>) {
 /// the largest displacement of a point, 1e-12 of the points' extent and `thickness` / 64); for
 /// the rare queries that use up the fixed work budget it may be earlier. A near miss within
 /// that tolerance of `thickness` (or within a few units in the last place of the coordinates),
-/// or a query with a coordinate above 2^1000 in magnitude, may be reported as a hit. The time
+/// or a query with a coordinate or a `thickness` above 2^1000 in magnitude, may be reported as a
+/// hit (at t = 0). The time
 /// per call is bounded (about 100 microseconds at worst; typically well under a microsecond).
 ///
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` when a pointer is NULL and
@@ -114,7 +115,8 @@ pub unsafe extern "C" fn softshell_ccd_vertex_triangle(
 /// the largest displacement of a point, 1e-12 of the points' extent and `thickness` / 64); for
 /// the rare queries that use up the fixed work budget it may be earlier. A near miss within
 /// that tolerance of `thickness` (or within a few units in the last place of the coordinates),
-/// or a query with a coordinate above 2^1000 in magnitude, may be reported as a hit. The time
+/// or a query with a coordinate or a `thickness` above 2^1000 in magnitude, may be reported as a
+/// hit (at t = 0). The time
 /// per call is bounded (about 100 microseconds at worst; typically well under a microsecond).
 ///
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` when a pointer is NULL and

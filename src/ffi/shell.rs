@@ -112,6 +112,9 @@ pub struct SoftshellShellDef {
     /// `softshell_shell_memory_bytes`) and the collision stats stay 0.
     pub collisions: bool,
     /// Collision thickness delta relative to the bounding-box diagonal, in [0, 1]. Default 1e-4.
+    /// With collisions on, it must also stay below the rest distance of every two primitives
+    /// that share no vertex (about the edge length over the diagonal on a smooth mesh), or
+    /// `softshell_shell_new` refuses it with `SOFTSHELL_STATUS_INVALID_ARGUMENT`.
     pub collision_thickness: f32,
     /// Worker threads: 0 = one per core, 1 = serial on the caller's thread (default), at most
     /// 256. Results are bit-identical whatever the count.
@@ -432,7 +435,8 @@ fn unsupported() -> Error {
 ///
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL argument, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
 /// for a def not made by `softshell_shell_def_default`, an unknown kind or a field out of range
-/// (the message names the field, its value and the valid range), `SOFTSHELL_STATUS_INVALID_MESH`
+/// (the message names the field, its value and the valid range) or a `collision_thickness` above
+/// the rest distance of two primitives sharing no vertex, `SOFTSHELL_STATUS_INVALID_MESH`
 /// for a mesh that is not closed, manifold, consistently oriented with outward normals (every
 /// connected piece on its own) and free of degenerate triangles (the message names the first
 /// offending edge or triangle), or larger than 1e6 m across (bounding-box diagonal),

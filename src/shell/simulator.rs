@@ -194,7 +194,26 @@ impl Shell {
                 / topology.edges.len().max(1) as f64) as f32;
         let stats = ShellStats { volume: rest_volume, volume_ratio: 1.0, ..Default::default() };
         // SPEC 5: no BVH when collisions are off.
-        let contact = settings.collisions.then(|| SelfContact::new(&rest, &topology.edges, &triangles));
+        let mut contact = settings.collisions.then(|| SelfContact::new(&rest, &topology.edges, &triangles));
+        // SPEC 1.6: a thickness above the rest gap of two primitives sharing no vertex makes the
+        // contact stage push them apart at once, every step (the shell inflates, or diverges).
+        let delta = settings.collision_thickness as f64 * diagonal as f64;
+        if let Some(contact) = contact.as_mut().filter(|_| delta > 0.0) {
+            if let Some((kind, i, j)) = contact.pair_within_at_rest(&rest, delta) {
+                let what = if kind == 0 {
+                    format!("vertex {i} and triangle {j}")
+                } else {
+                    let (a, b) = (topology.edges[i as usize], topology.edges[j as usize]);
+                    format!("edges {}-{} and {}-{}", a[0], a[1], b[0], b[1])
+                };
+                return Err(Error::invalid_argument(format!(
+                    "`collision_thickness` = {} (delta = {delta:e} m, relative to the bounding-box diagonal \
+                     {diagonal:e} m) is larger than the rest distance of {what}, which share no vertex: the contact \
+                     stage would push them apart from the first step; use a smaller collision_thickness",
+                    settings.collision_thickness
+                )));
+            }
+        }
         let state = State {
             vertex_face_offsets: topology.vertex_face_offsets.clone(),
             vertex_faces: topology.vertex_faces.clone(),
