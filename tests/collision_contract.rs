@@ -38,20 +38,6 @@ fn push_through() -> (bool, u64) {
     ((0..4).all(|j| p[j + 4].z > p[j].z), counts.contacts)
 }
 
-#[cfg(target_arch = "x86_64")]
-fn read_mxcsr() -> u32 {
-    let mut v: u32 = 0;
-    // SAFETY: stmxcsr writes 4 bytes to a local.
-    unsafe { std::arch::asm!("stmxcsr [{}]", in(reg) &mut v, options(nostack)) };
-    v
-}
-
-#[cfg(target_arch = "x86_64")]
-fn write_mxcsr(v: u32) {
-    // SAFETY: ldmxcsr reads 4 bytes from a local.
-    unsafe { std::arch::asm!("ldmxcsr [{}]", in(reg) &v, options(nostack)) };
-}
-
 /// A C host built with -ffast-math (crtfastmath.o) or a game engine that sets the
 /// flush-to-zero / denormals-are-zero bits of MXCSR for speed: self-contact must still be found.
 #[cfg(target_arch = "x86_64")]
@@ -59,10 +45,7 @@ fn write_mxcsr(v: u32) {
 fn self_contact_works_with_denormals_are_zero() {
     let (ok, contacts) = push_through();
     assert!(ok && contacts > 0, "baseline");
-    let saved = read_mxcsr();
-    write_mxcsr(saved | (1 << 6) | (1 << 15)); // DAZ | FTZ
-    let (ok, contacts) = push_through();
-    write_mxcsr(saved);
+    let (ok, contacts) = with_denormals_are_zero(push_through);
     assert!(contacts > 0, "no contact found with DAZ/FTZ set");
     assert!(ok, "the upper plate went through the lower one with DAZ/FTZ set");
 }

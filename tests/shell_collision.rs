@@ -211,34 +211,15 @@ fn a_squeezed_eight_genus_2_does_not_pass_through_itself() {
     squeeze("eight", &p, &t, 300);
 }
 
-#[cfg(target_arch = "x86_64")]
-fn read_mxcsr() -> u32 {
-    let mut v: u32 = 0;
-    // SAFETY: stmxcsr writes 4 bytes to a local.
-    unsafe { std::arch::asm!("stmxcsr [{}]", in(reg) &mut v, options(nostack)) };
-    v
-}
-
-#[cfg(target_arch = "x86_64")]
-fn write_mxcsr(v: u32) {
-    // SAFETY: ldmxcsr reads 4 bytes from a local.
-    unsafe { std::arch::asm!("ldmxcsr [{}]", in(reg) &v, options(nostack)) };
-}
-
 /// A host built with -ffast-math (gcc links crtfastmath.o, which sets FTZ and DAZ at start-up)
 /// or an engine that sets them for speed: the shell must still keep its lobes apart. With DAZ
 /// the BVH's key test (vertex indices once stored as the bits of f32 subnormals, compared with
 /// an f32 compare) called every pair neighbours and skipped it: the dumbbell turned inside out
-/// at step 8 (found in a review). The shell runs on this thread (threads = 1 in `squeeze`).
+/// at step 8 (found in a review). The shell runs on this thread (`squeeze` keeps the default,
+/// threads = 1).
 #[cfg(target_arch = "x86_64")]
 #[test]
 fn a_squeezed_dumbbell_keeps_its_lobes_apart_with_denormals_are_zero() {
     let (p, t) = dumbbell(20, 20);
-    let saved = read_mxcsr();
-    write_mxcsr(saved | (1 << 6) | (1 << 15)); // DAZ | FTZ
-    let result = std::panic::catch_unwind(|| squeeze("dumbbell (DAZ/FTZ)", &p, &t, 100));
-    write_mxcsr(saved);
-    if let Err(e) = result {
-        std::panic::resume_unwind(e);
-    }
+    with_denormals_are_zero(|| squeeze("dumbbell (DAZ/FTZ)", &p, &t, 100));
 }

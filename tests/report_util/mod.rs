@@ -332,3 +332,26 @@ impl Lattice {
 pub fn lattice_rest(columns: u32, rows: u32, spacing: f32) -> Vec<f32> {
     (0..rows).flat_map(|r| (0..columns).flat_map(move |c| [c as f32 * spacing, 0.0, r as f32 * spacing])).collect()
 }
+
+/// Runs `f` with the denormals-are-zero and flush-to-zero bits of this thread's MXCSR set, as a
+/// host built with -ffast-math (gcc's crtfastmath.o) or an engine that sets them for speed
+/// runs; the bits are restored afterwards, also when `f` panics.
+#[cfg(target_arch = "x86_64")]
+#[allow(dead_code)]
+pub fn with_denormals_are_zero<R>(f: impl FnOnce() -> R + std::panic::UnwindSafe) -> R {
+    fn read() -> u32 {
+        let mut v: u32 = 0;
+        // SAFETY: stmxcsr writes 4 bytes to a local.
+        unsafe { std::arch::asm!("stmxcsr [{}]", in(reg) &mut v, options(nostack)) };
+        v
+    }
+    fn write(v: u32) {
+        // SAFETY: ldmxcsr reads 4 bytes from a local.
+        unsafe { std::arch::asm!("ldmxcsr [{}]", in(reg) &v, options(nostack)) };
+    }
+    let saved = read();
+    write(saved | (1 << 6) | (1 << 15)); // DAZ | FTZ
+    let result = std::panic::catch_unwind(f);
+    write(saved);
+    result.unwrap_or_else(|e| std::panic::resume_unwind(e))
+}
