@@ -676,6 +676,36 @@ fn join(a: impl FnOnce() + Send, b: impl FnOnce() + Send) {
 mod tests {
     use super::*;
 
+    /// The AVX2 kernel sums the same entries as the plain one (to rounding: it pairs and fuses
+    /// them differently), for every count of entries a row can have up to 40 (the paths of
+    /// eight, two and one entries), and the same bits every time.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_avx2_weighted_sum_matches_the_plain_one() {
+        if !(std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")) {
+            eprintln!("skipped: this processor has no AVX2 and FMA");
+            return;
+        }
+        let y: Vec<Vec3A> = (0..97)
+            .map(|i| Vec3A::new((i as f32 * 0.37).sin(), (i as f32 * 0.11).cos() * 3.0, i as f32 - 40.0))
+            .collect();
+        for len in 0..=40 {
+            let index: Vec<u32> = (0..len).map(|p| ((p * 31 + 7) % 97) as u32).collect();
+            let value: Vec<f32> = (0..len).map(|p| 0.5 - (p as f32 * 0.73).sin()).collect();
+            let plain = weighted_sum(&y, &index, &value);
+            // SAFETY: the processor has AVX2 and FMA (checked above); every index is below 97.
+            let fast = unsafe { weighted_sum_avx2_fma(&y, &index, &value) };
+            let scale: f32 = index.iter().zip(&value).map(|(&i, &v)| (y[i as usize] * v).abs().max_element()).sum();
+            let diff = (plain - fast).abs().max_element();
+            assert!(diff <= 1e-6 * scale.max(1.0), "{len} entries: {plain} against {fast}");
+            // SAFETY: as above.
+            assert_eq!(fast, unsafe { weighted_sum_avx2_fma(&y, &index, &value) });
+            if len == 1 {
+                assert_eq!(fast, y[index[0] as usize] * value[0], "one entry is one product");
+            }
+        }
+    }
+
     /// A grid graph with a few long-range edges, factored and solved against a dense product.
     #[test]
     fn solves_a_graph_laplacian_system() {
