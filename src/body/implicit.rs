@@ -303,8 +303,43 @@ struct AssemblyTask<'a> {
 }
 
 /// The assembly of a chunk of vertices; returns its `Σ magnitude²`, `Σ |rhs|²` and whether a
-/// contact holds.
+/// contact holds. Compiled with AVX2 and FMA too, used where the processor has them (checked at
+/// run time; the two round differently in the last bits).
 fn assemble_chunk(
+    sys: &System,
+    terms: &[SpringTerms],
+    force: &[Vec3],
+    gas_dot_v: &[f64],
+    obstacles: &[Obstacle],
+    t: AssemblyTask,
+) -> (f64, f64, bool) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the processor has the features the function is compiled for (checked above).
+        return unsafe { assemble_chunk_avx2_fma(sys, terms, force, gas_dot_v, obstacles, t) };
+    }
+    assemble_chunk_with(sys, terms, force, gas_dot_v, obstacles, t)
+}
+
+/// [`assemble_chunk`] with AVX2 and FMA.
+///
+/// # Safety
+/// The processor must have AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn assemble_chunk_avx2_fma(
+    sys: &System,
+    terms: &[SpringTerms],
+    force: &[Vec3],
+    gas_dot_v: &[f64],
+    obstacles: &[Obstacle],
+    t: AssemblyTask,
+) -> (f64, f64, bool) {
+    assemble_chunk_with(sys, terms, force, gas_dot_v, obstacles, t)
+}
+
+#[inline(always)]
+fn assemble_chunk_with(
     sys: &System,
     terms: &[SpringTerms],
     force: &[Vec3],
@@ -363,6 +398,7 @@ fn assemble_chunk(
 /// (SPEC 2.3) follows the solve, bounded by the normal speed the contact took away; restitution
 /// with the other integrators' contact response.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn start_vertex(
     model: &Model,
     obstacles: &[Obstacle],
@@ -406,6 +442,7 @@ fn start_vertex(
 
 /// Assembly of one vertex from its springs' terms: the right side `h f + h² K v`, the coupling
 /// blocks of its springs, its diagonal block (inverted) and its force magnitude.
+#[inline(always)]
 fn assemble_vertex(
     sys: &System,
     terms: &[SpringTerms],
