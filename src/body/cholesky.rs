@@ -12,6 +12,13 @@
 //! pattern of each row from the elimination tree), in f64, stored in f32. Solves gather only (the
 //! forward solve by rows of L, the backward one by columns), so the two halves of every dissection
 //! can be solved in parallel, each entry always summed in the same order.
+//!
+//! Measured and not kept: one copy of the factor (by rows; the backward solve scattering along
+//! them instead of gathering along the columns) halves its bytes (606 to 314 KB on the issue-5
+//! balloon's coarse level, which the solves stream twice per CG iteration) and took a fifth off
+//! the backward solve, but its sums run in one chain per row of the solution: over six drops
+//! of the balloon (benches/body_balloon.rs, `BODY_DROP_OFFSET`) 6.48 CG iterations per step
+//! against 6.35, which cost what it saved.
 
 use glam::{Vec3, Vec3A};
 
