@@ -15,10 +15,11 @@
 //!
 //! Measured and not kept: one copy of the factor (by rows; the backward solve scattering along
 //! them instead of gathering along the columns) halves its bytes (606 to 314 KB on the issue-5
-//! balloon's coarse level, which the solves stream twice per CG iteration) and took a fifth off
-//! the backward solve, but its sums run in one chain per row of the solution: over six drops
-//! of the balloon (benches/body_balloon.rs, `BODY_DROP_OFFSET`) 6.48 CG iterations per step
-//! against 6.35, which cost what it saved.
+//! balloon's coarse level, which the solves stream twice per CG iteration) and took about a
+//! fifth off the backward solve (its share of a profile), about 1% of a step. Its sums run in
+//! one chain per row of the solution; over six drops of the balloon (benches/body_balloon.rs,
+//! `BODY_DROP_OFFSET`) it took 6.48 CG iterations per step against 6.35 for these solves (the
+//! drops spread by 0.3 either way), so no gain could be shown.
 
 use glam::{Vec3, Vec3A};
 
