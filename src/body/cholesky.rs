@@ -56,6 +56,7 @@ macro_rules! dispatched {
         }
     };
 }
+
 /// Parts of the dissection with fewer vertices than this are not split further.
 const LEAF: usize = 48;
 
@@ -557,6 +558,7 @@ impl Cholesky {
 /// the processor has them (see `dispatched!`).
 #[derive(Clone, Copy)]
 struct WeightedSum {
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     /// Set only in the twins with AVX2 and FMA of `dispatched!`, after checking the processor.
     avx2_fma: bool,
 }
@@ -582,8 +584,8 @@ impl WeightedSum {
 
 /// `Σ y[index[p]] value[p]` in four running sums (entries p mod 4), added as `(s0 + s1) +
 /// (s2 + s3)`: with one running sum each entry waited for the previous one's addition (4
-/// cycles), which set the pace of the triangular solves (a row of the coarse factor has about a
-/// dozen entries). The order is fixed by the row, so the bits do not depend on the thread count.
+/// cycles), which set the pace of the triangular solves (a row of the balloon's coarse factor has
+/// about 31 entries). The order is fixed by the row, so the bits do not depend on the thread count.
 #[inline(always)]
 fn weighted_sum(y: &[Vec3A], index: &[u32], value: &[f32]) -> Vec3A {
     let mut sums = [Vec3A::ZERO; 4];
