@@ -302,23 +302,26 @@ struct AssemblyTask<'a> {
     gas: &'a mut [f64],
 }
 
+/// What the assembly of every chunk reads.
+struct AssemblyInput<'a> {
+    sys: &'a System<'a>,
+    terms: &'a [SpringTerms],
+    /// The external forces gathered before (wind), or empty.
+    force: &'a [Vec3],
+    gas_dot_v: &'a [f64],
+    obstacles: &'a [Obstacle],
+}
+
 /// The assembly of a chunk of vertices; returns its `Σ magnitude²`, `Σ |rhs|²` and whether a
 /// contact holds. Compiled with AVX2 and FMA too, used where the processor has them (checked at
 /// run time; the two round differently in the last bits).
-fn assemble_chunk(
-    sys: &System,
-    terms: &[SpringTerms],
-    force: &[Vec3],
-    gas_dot_v: &[f64],
-    obstacles: &[Obstacle],
-    t: AssemblyTask,
-) -> (f64, f64, bool) {
+fn assemble_chunk(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, bool) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: the processor has the features the function is compiled for (checked above).
-        return unsafe { assemble_chunk_avx2_fma(sys, terms, force, gas_dot_v, obstacles, t) };
+        return unsafe { assemble_chunk_avx2_fma(input, t) };
     }
-    assemble_chunk_with(sys, terms, force, gas_dot_v, obstacles, t)
+    assemble_chunk_with(input, t)
 }
 
 /// [`assemble_chunk`] with AVX2 and FMA.
@@ -327,26 +330,13 @@ fn assemble_chunk(
 /// The processor must have AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn assemble_chunk_avx2_fma(
-    sys: &System,
-    terms: &[SpringTerms],
-    force: &[Vec3],
-    gas_dot_v: &[f64],
-    obstacles: &[Obstacle],
-    t: AssemblyTask,
-) -> (f64, f64, bool) {
-    assemble_chunk_with(sys, terms, force, gas_dot_v, obstacles, t)
+unsafe fn assemble_chunk_avx2_fma(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, bool) {
+    assemble_chunk_with(input, t)
 }
 
 #[inline(always)]
-fn assemble_chunk_with(
-    sys: &System,
-    terms: &[SpringTerms],
-    force: &[Vec3],
-    gas_dot_v: &[f64],
-    obstacles: &[Obstacle],
-    t: AssemblyTask,
-) -> (f64, f64, bool) {
+fn assemble_chunk_with(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, bool) {
+    let AssemblyInput { sys, terms, force, gas_dot_v, obstacles } = *input;
     let model = sys.model;
     let mut t = t;
     t.gas.fill(0.0);
@@ -1470,6 +1460,7 @@ pub(crate) fn substep(
             // SAFETY: nobody writes the sums or the terms in this pass.
             let (gas_v, terms) = unsafe { (shared.gas_v.whole(), shared.terms.whole()) };
             sum_gas_partial(gas_v, &mut gas_dot_v);
+            let assembly = AssemblyInput { sys: &sys, terms, force, gas_dot_v: &gas_dot_v, obstacles };
             // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner (per
             // vertex the springs are stiff along the surface and soft across it, which a diagonal
             // (per axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can),
@@ -1497,7 +1488,7 @@ pub(crate) fn substep(
                         gas: shared.gas.part(gas_rows(c)),
                     }
                 };
-                let (magnitude, rhs, contact) = assemble_chunk(&sys, terms, force, &gas_dot_v, obstacles, task);
+                let (magnitude, rhs, contact) = assemble_chunk(&assembly, task);
                 // SAFETY: this chunk's sums, written by this member alone.
                 unsafe {
                     shared.chunk_magnitude.part(c..c + 1)[0] = magnitude;
