@@ -29,6 +29,8 @@ use std::ops::Range;
 
 use glam::{Vec3A, Vec4};
 
+use super::springs::Springs;
+
 /// Rows per slice (the lanes of a 256-bit register of f32).
 pub(crate) const SLICE: usize = 8;
 
@@ -125,9 +127,9 @@ impl PackedCoupling {
 #[repr(C, align(32))]
 #[derive(Clone, Copy, Default)]
 pub(crate) struct CouplingGroup {
-    w: [[u16; SLICE]; 3],
-    alpha: [u16; SLICE],
-    other: [u32; SLICE],
+    pub(super) w: [[u16; SLICE]; 3],
+    pub(super) alpha: [u16; SLICE],
+    pub(super) other: [u32; SLICE],
 }
 
 /// The couplings of all rows: per slice its first group (`offsets`, one more entry than slices)
@@ -136,13 +138,51 @@ pub(crate) struct CouplingGroup {
 pub(crate) struct CouplingSlices {
     pub offsets: Vec<u32>,
     pub groups: Vec<CouplingGroup>,
+    /// Per group, the spring of each lane ([`NO_SPRING`] for padding): where the assembly finds
+    /// the lane's block and right side (laid out by [`CouplingSlices::layout_springs`] with the
+    /// other ends; empty when the rows were laid out otherwise, as the tests do).
+    pub springs: Vec<[u32; SLICE]>,
+    /// The [`Springs::adjacency_id`] of the springs laid out (0: none).
+    adjacency_id: u64,
 }
 
+/// The spring of a padding lane.
+pub(crate) const NO_SPRING: u32 = u32::MAX;
+
 impl CouplingSlices {
+    /// Lays the slices out for `springs` (their adjacency), with every lane's other end and
+    /// spring, unless they are laid out already (the same [`Springs::adjacency_id`]): the layout
+    /// changes only with the topology, and the assembly then writes only the blocks.
+    pub fn layout_springs(&mut self, springs: &Springs) {
+        if springs.adjacency_id != 0 && springs.adjacency_id == self.adjacency_id {
+            return;
+        }
+        self.layout(&springs.offsets);
+        let n = springs.offsets.len().saturating_sub(1);
+        self.springs.clear();
+        self.springs.resize(self.groups.len(), [NO_SPRING; SLICE]);
+        for row in 0..n {
+            let (slice, lane) = (row / SLICE, row % SLICE);
+            let groups = self.offsets[slice] as usize..self.offsets[slice + 1] as usize;
+            let around = springs.around(row);
+            for (k, g) in groups.enumerate() {
+                match around.get(k) {
+                    Some(&(spring, other)) => {
+                        self.groups[g].other[lane] = other;
+                        self.springs[g][lane] = spring;
+                    }
+                    None => pad(&mut self.groups[g], lane, row),
+                }
+            }
+        }
+        self.adjacency_id = springs.adjacency_id;
+    }
+
     /// Lays the slices out for rows whose couplings are counted by `row_offsets` (CSR offsets,
     /// one more entry than rows). The lanes of rows past the last one (the tail of the last
     /// slice) are made padding here; every other lane is written through [`SliceRowsMut::row`].
     pub fn layout(&mut self, row_offsets: &[u32]) {
+        self.adjacency_id = 0;
         let n = row_offsets.len().saturating_sub(1);
         let slices = n.div_ceil(SLICE);
         self.offsets.clear();
@@ -167,7 +207,9 @@ impl CouplingSlices {
     }
 
     pub fn memory_bytes(&self) -> usize {
-        self.offsets.capacity() * 4 + self.groups.capacity() * std::mem::size_of::<CouplingGroup>()
+        self.offsets.capacity() * 4
+            + self.groups.capacity() * std::mem::size_of::<CouplingGroup>()
+            + self.springs.capacity() * std::mem::size_of::<[u32; SLICE]>()
     }
 }
 
@@ -202,7 +244,7 @@ pub(crate) struct SliceRowsMut<'a> {
 
 impl SliceRowsMut<'_> {
     /// The groups of row `row`'s slice (indices into `self.groups`).
-    fn groups_of(&self, row: usize) -> Range<usize> {
+    pub fn groups_of(&self, row: usize) -> Range<usize> {
         let base = self.offsets[self.first_row / SLICE] as usize;
         let slice = row / SLICE;
         self.offsets[slice] as usize - base..self.offsets[slice + 1] as usize - base

@@ -27,8 +27,11 @@ use super::energy;
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::{self, Gas};
 use super::obstacles::{Obstacle, resolve, touching};
+#[cfg(target_arch = "x86_64")]
+use super::spring_sums::slice_spring_sums_avx2;
+use super::spring_sums::{SliceSums, SpringSums, row_spring_sums};
 use super::spring_terms::{SpringInput, SpringTerms, spring_terms_range};
-use super::symmetric_block::{SymmetricBlock, SymmetricParts};
+use super::symmetric_block::SymmetricBlock;
 use crate::parallel::{SharedSlice, Team, WorkerPool};
 
 /// How a vertex in contact with an obstacle is constrained inside the solve (Baraff and Witkin
@@ -212,7 +215,7 @@ impl ImplicitScratch {
             buffer.resize(n, Vec3A::ZERO);
         }
         self.inv_diag.resize(n, SymmetricBlock::default());
-        self.couplings.layout(&model.springs.offsets);
+        self.couplings.layout_springs(model.springs);
     }
 
     pub fn memory_bytes(&self) -> usize {
@@ -290,6 +293,8 @@ impl System<'_> {
 struct AssemblyTask<'a> {
     first: usize,
     couplings: SliceRowsMut<'a>,
+    /// The spring of each lane of those groups ([`CouplingSlices::springs`]).
+    springs: &'a [[u32; SLICE]],
     rhs: &'a mut [Vec3A],
     inv_diag: &'a mut [SymmetricBlock],
     /// The start of the solve: Δv (holding the warm start, which the assembly replaces) and
@@ -314,14 +319,16 @@ struct AssemblyInput<'a> {
 
 /// The assembly of a chunk of vertices; returns its `Σ magnitude²`, `Σ |rhs|²` and whether a
 /// contact holds. Compiled with AVX2 and FMA too, used where the processor has them (checked at
-/// run time; the two round differently in the last bits).
+/// run time), with the springs' sums eight rows at a time ([`spring_sums`]: the same sums).
+///
+/// [`spring_sums`]: super::spring_sums
 fn assemble_chunk(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, bool) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: the processor has the features the function is compiled for (checked above).
         return unsafe { assemble_chunk_avx2_fma(input, t) };
     }
-    assemble_chunk_with(input, t)
+    assemble_chunk_with::<false>(input, t)
 }
 
 /// [`assemble_chunk`] with AVX2 and FMA.
@@ -331,11 +338,14 @@ fn assemble_chunk(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, bool) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn assemble_chunk_avx2_fma(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, bool) {
-    assemble_chunk_with(input, t)
+    assemble_chunk_with::<true>(input, t)
 }
 
+/// [`assemble_chunk`]; with `SLICES` the springs' sums of each slice come from
+/// [`slice_spring_sums_avx2`] (only where the processor has AVX2, and the layout's springs are
+/// there), else row by row.
 #[inline(always)]
-fn assemble_chunk_with(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, bool) {
+fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, bool) {
     let AssemblyInput { sys, terms, force, gas_dot_v, obstacles } = *input;
     let model = sys.model;
     let mut t = t;
@@ -343,8 +353,28 @@ fn assemble_chunk_with(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, boo
     let mut run = GasRun::default();
     let (mut magnitude_squared, mut rhs_squared, mut any_contact) = (0.0f64, 0.0f64, false);
     let mut contacts = 0;
-    for k in 0..t.rhs.len() {
+    let rows = t.rhs.len();
+    let slices = SLICES && t.springs.len() == t.couplings.groups.len();
+    let mut slice_sums = SliceSums::default();
+    for k in 0..rows {
         let i = t.first + k;
+        let lane = i % SLICE;
+        let springs = if slices {
+            if lane == 0 {
+                let groups = t.couplings.groups_of(i);
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: `SLICES` is set only where the processor has AVX2.
+                unsafe {
+                    slice_sums =
+                        slice_spring_sums_avx2(&mut t.couplings.groups[groups.clone()], &t.springs[groups], terms, i);
+                }
+                #[cfg(not(target_arch = "x86_64"))]
+                unreachable!("{groups:?}");
+            }
+            slice_sums.lane(lane)
+        } else {
+            row_spring_sums(model.springs.around(i), i, terms, t.couplings.row(i))
+        };
         // The same operations as `external_forces` and `add_gas_forces_parallel`.
         let f = force.get(i).copied().unwrap_or_else(|| {
             let mut f = model.settings.gravity * model.mass[i];
@@ -353,7 +383,7 @@ fn assemble_chunk_with(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, boo
             }
             f
         });
-        let (rhs, mut inv_diag, magnitude) = assemble_vertex(sys, terms, i, f, gas_dot_v, &mut t.couplings);
+        let (rhs, mut inv_diag, magnitude) = assemble_vertex(sys, springs, i, f, gas_dot_v);
         let (dv, filter) = start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, t.dv[k], &mut inv_diag);
         t.rhs[k] = rhs;
         t.inv_diag[k] = inv_diag;
@@ -430,41 +460,25 @@ fn start_vertex(
     (dv.into(), ContactFilter::Slide(normal, pushed.max(0.0)))
 }
 
-/// Assembly of one vertex from its springs' terms: the right side `h f + h² K v`, the coupling
-/// blocks of its springs, its diagonal block (inverted) and its force magnitude.
+/// Assembly of one vertex from its springs' sums ([`SpringSums`]): the right side
+/// `h f + h² K v`, its diagonal block (inverted) and its force magnitude.
 #[inline(always)]
 fn assemble_vertex(
     sys: &System,
-    terms: &[SpringTerms],
+    springs: SpringSums,
     i: usize,
     force: Vec3,
     gas_dot_v: &[f64],
-    couplings: &mut SliceRowsMut,
 ) -> (Vec3A, SymmetricBlock, f32) {
     let model = sys.model;
-    let h = sys.h;
-    let mut rhs = Vec3A::from(force) * h;
-    // The diagonal block is `(m + Σ alpha) I + Σ w wᵀ`: the scalar part summed apart.
-    let mut diag = SymmetricParts::default();
-    let mut diag_scalar = model.mass[i];
-    let mut magnitude = model.mass[i] * model.settings.gravity.length();
-    let around = model.springs.around(i);
-    let mut row = couplings.row(i);
-    for (k, &(spring, j)) in around.iter().enumerate() {
-        let t = &terms[spring as usize];
-        // `Springs::ends` holds each spring as [lower, higher] vertex.
-        let sign = if (i as u32) < j { 1.0 } else { -1.0 };
-        rhs += Vec3A::from(t.rhs) * sign;
-        row.set(k, t.coupling, j);
-        // The block as the coupling slices store it (bfloat16), for the diagonal too: the
-        // matrix is then exactly that of the rounded springs (see `coupling_slices`).
-        let coupling = t.coupling.unpacked();
-        diag.add_outer(coupling.w(), 1.0);
-        diag_scalar += coupling.alpha();
-        magnitude += (model.settings.spring_stiffness * t.extension).abs();
-    }
-    row.finish(around.len());
-    diag.diagonal += Vec3A::splat(diag_scalar);
+    let mut rhs = Vec3A::from(force) * sys.h + springs.rhs;
+    // The diagonal block is `(m + Σ alpha) I + Σ w wᵀ`, from the blocks as the coupling slices
+    // store them (bfloat16): the matrix is then exactly that of the rounded springs (see
+    // `coupling_slices`).
+    let mut diag = springs.outer;
+    diag.diagonal += Vec3A::splat(model.mass[i] + springs.alpha);
+    let mut magnitude =
+        model.mass[i] * model.settings.gravity.length() + model.settings.spring_stiffness * springs.extension;
     if let Some(frag) = sys.fragment(i) {
         let g = Vec3A::from(sys.gradient[i]);
         let coef = sys.gas_coef[frag];
@@ -766,6 +780,7 @@ struct SolveInput<'a> {
 /// arrays that no member writes in that pass.
 struct Shared<'a> {
     coupling_offsets: &'a [u32],
+    coupling_springs: &'a [[u32; SLICE]],
     couplings: SharedSlice<'a, CouplingGroup>,
     rhs: SharedSlice<'a, Vec3A>,
     inv_diag: SharedSlice<'a, SymmetricBlock>,
@@ -1283,6 +1298,7 @@ pub(crate) fn substep(
     };
     let shared = Shared {
         coupling_offsets: &s.couplings.offsets,
+        coupling_springs: &s.couplings.springs,
         couplings: SharedSlice::new(&mut s.couplings.groups),
         rhs: SharedSlice::new(&mut s.rhs),
         inv_diag: SharedSlice::new(&mut s.inv_diag),
@@ -1476,9 +1492,10 @@ pub(crate) fn substep(
                         first,
                         couplings: SliceRowsMut {
                             offsets: shared.coupling_offsets,
-                            groups: shared.couplings.part(groups),
+                            groups: shared.couplings.part(groups.clone()),
                             first_row: first,
                         },
+                        springs: shared.coupling_springs.get(groups).unwrap_or(&[]),
                         rhs: shared.rhs.part(rows.clone()),
                         inv_diag: shared.inv_diag.part(rows.clone()),
                         dv: shared.dv.part(rows.clone()),

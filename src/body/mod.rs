@@ -26,6 +26,7 @@ mod implicit;
 mod obstacles;
 mod settings;
 mod simulator;
+mod spring_sums;
 mod spring_terms;
 mod springs;
 mod surface;

@@ -15,6 +15,10 @@ pub(crate) struct Springs {
     /// parallel loops gather per vertex in a fixed order instead of scattering.
     pub offsets: Vec<u32>,
     pub adjacency: Vec<(u32, u32)>,
+    /// Names this adjacency (each [`Springs::build_adjacency`] takes a new one; 0: none built),
+    /// so that what is laid out from it (the implicit integrator's coupling slices) is laid out
+    /// again only when it changes.
+    pub adjacency_id: u64,
 }
 
 impl Springs {
@@ -44,6 +48,10 @@ impl Springs {
         }
         self.offsets = offsets;
         self.adjacency = adjacency;
+        // Unique over the process, not per body: a copy of a body's springs keeps its id, and
+        // an id is never reused for another adjacency.
+        static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        self.adjacency_id = NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }
 
     /// (spring, other end) pairs around vertex `i`.
