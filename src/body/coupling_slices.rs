@@ -27,7 +27,7 @@
 
 use std::ops::Range;
 
-use glam::{Vec3A, Vec4};
+use glam::{Vec3, Vec3A, Vec4};
 
 use super::springs::Springs;
 
@@ -319,30 +319,8 @@ impl RowMut<'_> {
 }
 
 /// Calls `f(row, Σ_c B_c (x_row - input[other_c]))` for each row of `rows` (`rows.start` a
-/// multiple of [`SLICE`]), summing over its couplings `B_c` in `groups` (all of them) eight rows
-/// at a time: with AVX2 and FMA when the processor has them (checked at run time: the library
-/// is built for baseline x86-64), else in plain Rust (the two round differently, so they differ
-/// in the last bits, never between thread counts on one machine).
-///
-/// Panics if an other end is not a row of `input`.
-#[inline]
-pub(crate) fn for_each_row_sum(
-    offsets: &[u32],
-    groups: &[CouplingGroup],
-    input: &[Vec3A],
-    rows: Range<usize>,
-    f: impl FnMut(usize, Vec3A),
-) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-        // SAFETY: the processor has the features the function is compiled for (checked above).
-        unsafe { row_sums_avx2(offsets, groups, input, rows, f) };
-        return;
-    }
-    row_sums_scalar(offsets, groups, input, rows, f);
-}
-
-/// [`for_each_row_sum`] in plain Rust.
+/// multiple of [`SLICE`]), in order, summing over its couplings `B_c` in `groups` (the plain
+/// Rust part of [`product_slices`]).
 fn row_sums_scalar(
     offsets: &[u32],
     groups: &[CouplingGroup],
@@ -416,32 +394,166 @@ unsafe fn widen(h: std::arch::x86_64::__m128i) -> std::arch::x86_64::__m256 {
     _mm256_castsi256_ps(_mm256_slli_epi32::<16>(_mm256_cvtepu16_epi32(h)))
 }
 
-/// [`for_each_row_sum`] with AVX2 and FMA.
+/// What a product with the implicit system's matrix adds to each row after its couplings' sum
+/// `Σ B (x_row - x_other)`, and how it filters the row. Every slice is indexed by row (all rows,
+/// not a chunk's), except `gas_scale` (by fragment) and `contact_normal` (by slot).
+#[derive(Clone, Copy)]
+pub(crate) struct RowTerms<'a> {
+    /// The diagonal's `m x`; a row whose inverse mass is 0 (pinned) is zero.
+    pub mass: &'a [f32],
+    pub inv_mass: &'a [f32],
+    /// The gas's rank-one term `g (h² P/V Σ g·x)`: per row its fragment (`u32::MAX`: none) and
+    /// gradient `g`, per fragment the scale (empty `fragment`: no gas).
+    pub fragment: &'a [u32],
+    pub gradient: &'a [Vec3],
+    pub gas_scale: &'a [f32],
+    /// The contact filter: per row the slot of its contact normal (`u32::MAX`: free; empty: no
+    /// contacts), whose component is taken out of the row.
+    pub contact_slot: &'a [u32],
+    pub contact_normal: &'a [Vec3A],
+}
+
+impl RowTerms<'_> {
+    /// Row `i` of the product from its couplings' sum `sum` and its input `x` (the eight-row
+    /// version's operations in its order, one lane).
+    #[inline(always)]
+    fn row(&self, i: usize, x: Vec3A, sum: Vec3A) -> Vec3A {
+        let mut row = x * self.mass[i] + sum;
+        if let Some(&fragment) = self.fragment.get(i).filter(|&&f| f != u32::MAX) {
+            row += Vec3A::from(self.gradient[i]) * self.gas_scale[fragment as usize];
+        }
+        if let Some(&slot) = self.contact_slot.get(i).filter(|&&s| s != u32::MAX) {
+            let n = self.contact_normal[slot as usize];
+            row -= n * (row.x * n.x + row.y * n.y + row.z * n.z);
+        }
+        if self.inv_mass[i] == 0.0 { Vec3A::ZERO } else { row }
+    }
+}
+
+/// Rows `rows` (`rows.start` a multiple of [`SLICE`]) of the product `A input` of the implicit
+/// system's matrix (the couplings in `groups`, the rest in `terms`) into `out` (its rows from
+/// `rows.start`); returns `Σ input·out` over them. Eight rows at a time with AVX2 and FMA when
+/// the processor has them: the couplings' sums stay in registers for the rest of the row (a
+/// second pass over the rows, one at a time, took about 40% of the product's instructions).
+/// The dot products are summed per lane (row mod 8) in f64 and the lanes added in a fixed order,
+/// so the result depends on neither the thread count nor which path ran a slice.
+///
+/// Panics if an other end is not a row of `input`, or a slice of `terms` is not one per row.
+pub(crate) fn product_slices(
+    offsets: &[u32],
+    groups: &[CouplingGroup],
+    input: &[Vec3A],
+    rows: Range<usize>,
+    terms: &RowTerms,
+    out: &mut [Vec3A],
+) -> f64 {
+    let n = input.len();
+    assert!(out.len() == rows.len() && rows.end <= n && rows.start % SLICE == 0, "rows {rows:?} of {n}");
+    assert!(terms.mass.len() == n && terms.inv_mass.len() == n);
+    assert!(terms.fragment.is_empty() || (terms.fragment.len() == n && terms.gradient.len() == n));
+    assert!(terms.contact_slot.is_empty() || terms.contact_slot.len() == n);
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the processor has the features the function is compiled for (checked above).
+        return unsafe { product_slices_avx2(offsets, groups, input, rows, terms, out) };
+    }
+    product_slices_scalar(offsets, groups, input, rows, terms, out)
+}
+
+/// [`product_slices`] in plain Rust (the caller checked the slices' lengths).
+fn product_slices_scalar(
+    offsets: &[u32],
+    groups: &[CouplingGroup],
+    input: &[Vec3A],
+    rows: Range<usize>,
+    terms: &RowTerms,
+    out: &mut [Vec3A],
+) -> f64 {
+    let mut lanes = [0.0f64; SLICE];
+    let first = rows.start;
+    row_sums_scalar(offsets, groups, input, rows, |i, sum| {
+        let row = terms.row(i, input[i], sum);
+        out[i - first] = row;
+        lanes[i % SLICE] += input[i].dot(row) as f64;
+    });
+    sum_lanes(lanes)
+}
+
+/// The lanes' dot products added in a fixed order.
+fn sum_lanes(l: [f64; SLICE]) -> f64 {
+    ((l[0] + l[1]) + (l[2] + l[3])) + ((l[4] + l[5]) + (l[6] + l[7]))
+}
+
+/// Eight `Vec3` from `points[first..first + 8]`, as their x, y and z lanes (the 16-byte loads
+/// read four bytes past each point: the last one's only if a point follows, else one at a time).
+///
+/// # Safety
+/// The processor must have AVX2; `first + 8 <= points.len()`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn load_points_transposed(
+    points: &[Vec3],
+    first: usize,
+) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+    use std::arch::x86_64::*;
+    if first + SLICE < points.len() {
+        let base = points[first..].as_ptr() as *const f32;
+        // SAFETY: the points first..first + 8 and the one after them (checked above).
+        let row = |lane: usize| unsafe { base.add(3 * lane) };
+        // SAFETY: as above.
+        let (r04, r15, r26, r37) = unsafe {
+            (
+                _mm256_set_m128(_mm_loadu_ps(row(4)), _mm_loadu_ps(row(0))),
+                _mm256_set_m128(_mm_loadu_ps(row(5)), _mm_loadu_ps(row(1))),
+                _mm256_set_m128(_mm_loadu_ps(row(6)), _mm_loadu_ps(row(2))),
+                _mm256_set_m128(_mm_loadu_ps(row(7)), _mm_loadu_ps(row(3))),
+            )
+        };
+        let xy01 = _mm256_unpacklo_ps(r04, r15);
+        let xy23 = _mm256_unpacklo_ps(r26, r37);
+        let zw01 = _mm256_unpackhi_ps(r04, r15);
+        let zw23 = _mm256_unpackhi_ps(r26, r37);
+        (
+            _mm256_shuffle_ps::<0x44>(xy01, xy23),
+            _mm256_shuffle_ps::<0xEE>(xy01, xy23),
+            _mm256_shuffle_ps::<0x44>(zw01, zw23),
+        )
+    } else {
+        let p = &points[first..first + SLICE];
+        let axis = |a: usize| std::array::from_fn::<f32, SLICE, _>(|lane| p[lane][a]);
+        let (x, y, z) = (axis(0), axis(1), axis(2));
+        // SAFETY: eight f32 from each array.
+        unsafe { (_mm256_loadu_ps(x.as_ptr()), _mm256_loadu_ps(y.as_ptr()), _mm256_loadu_ps(z.as_ptr())) }
+    }
+}
+
+/// [`product_slices`] with AVX2 and FMA (the caller checked the slices' lengths).
 ///
 /// # Safety
 /// The processor must have AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn row_sums_avx2(
+unsafe fn product_slices_avx2(
     offsets: &[u32],
     groups: &[CouplingGroup],
     input: &[Vec3A],
     rows: Range<usize>,
-    mut f: impl FnMut(usize, Vec3A),
-) {
+    terms: &RowTerms,
+    out: &mut [Vec3A],
+) -> f64 {
     use std::arch::x86_64::*;
     let n = input.len();
-    assert!(rows.end <= n && n <= i32::MAX as usize, "rows {rows:?} of {n}");
-    // Unsigned `other < n` for eight lanes at once: max(other, n - 1) == n - 1.
+    assert!(n <= i32::MAX as usize);
     let last = _mm256_set1_epi32((n.max(1) - 1) as i32);
+    let free = _mm256_set1_epi32(-1);
+    let first = rows.start;
+    let (mut dots_low, mut dots_high) = (_mm256_setzero_pd(), _mm256_setzero_pd());
     let mut row = rows.start;
     while row < rows.end {
         let slice = row / SLICE;
         let lanes = (rows.end - row).min(SLICE);
-        let mut own = [0u32; SLICE];
-        for (lane, own) in own.iter_mut().enumerate() {
-            *own = (row + lane).min(n - 1) as u32;
-        }
+        let own: [u32; SLICE] = std::array::from_fn(|lane| (row + lane).min(n - 1) as u32);
         // SAFETY: every index of `own` is below n (clamped above).
         let (xx, xy, xz) = unsafe { load_transposed(input, &own) };
         let (mut ax, mut ay, mut az) = (_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps());
@@ -469,31 +581,166 @@ unsafe fn row_sums_avx2(
             ay = _mm256_fmadd_ps(wy, s, _mm256_fmadd_ps(alpha, dy, ay));
             az = _mm256_fmadd_ps(wz, s, _mm256_fmadd_ps(alpha, dz, az));
         }
-        let (mut sx, mut sy, mut sz) = ([0f32; SLICE], [0f32; SLICE], [0f32; SLICE]);
-        // SAFETY: unaligned stores into local arrays of eight f32.
-        unsafe {
-            _mm256_storeu_ps(sx.as_mut_ptr(), ax);
-            _mm256_storeu_ps(sy.as_mut_ptr(), ay);
-            _mm256_storeu_ps(sz.as_mut_ptr(), az);
+        if lanes < SLICE {
+            // The last rows, fewer than a slice: one at a time.
+            let (mut sx, mut sy, mut sz) = ([0f32; SLICE], [0f32; SLICE], [0f32; SLICE]);
+            // SAFETY: eight f32 into each local array.
+            unsafe {
+                _mm256_storeu_ps(sx.as_mut_ptr(), ax);
+                _mm256_storeu_ps(sy.as_mut_ptr(), ay);
+                _mm256_storeu_ps(sz.as_mut_ptr(), az);
+            }
+            let mut dots = [0.0f64; SLICE];
+            for lane in 0..lanes {
+                let i = row + lane;
+                let value = terms.row(i, input[i], Vec3A::new(sx[lane], sy[lane], sz[lane]));
+                out[i - first] = value;
+                dots[lane] = input[i].dot(value) as f64;
+            }
+            // SAFETY: four f64 from each half of the array.
+            unsafe {
+                dots_low = _mm256_add_pd(dots_low, _mm256_loadu_pd(dots.as_ptr()));
+                dots_high = _mm256_add_pd(dots_high, _mm256_loadu_pd(dots.as_ptr().add(4)));
+            }
+            break;
         }
-        for lane in 0..lanes {
-            f(row + lane, Vec3A::new(sx[lane], sy[lane], sz[lane]));
+        // SAFETY: rows row..row + 8 of each per-row slice (all of length n, row + 8 <= n).
+        let (mass, inv_mass) = unsafe {
+            (
+                _mm256_loadu_ps(terms.mass[row..row + SLICE].as_ptr()),
+                _mm256_loadu_ps(terms.inv_mass[row..row + SLICE].as_ptr()),
+            )
+        };
+        let mut rx = _mm256_add_ps(_mm256_mul_ps(xx, mass), ax);
+        let mut ry = _mm256_add_ps(_mm256_mul_ps(xy, mass), ay);
+        let mut rz = _mm256_add_ps(_mm256_mul_ps(xz, mass), az);
+        if !terms.fragment.is_empty() {
+            let fragment = &terms.fragment[row..row + SLICE];
+            let scale = if fragment.iter().all(|&f| f == fragment[0]) {
+                (fragment[0] != u32::MAX).then(|| _mm256_set1_ps(terms.gas_scale[fragment[0] as usize]))
+            } else {
+                let scale: [f32; SLICE] = std::array::from_fn(|lane| match fragment[lane] {
+                    u32::MAX => 0.0,
+                    f => terms.gas_scale[f as usize],
+                });
+                // SAFETY: eight f32.
+                Some(unsafe { _mm256_loadu_ps(scale.as_ptr()) })
+            };
+            if let Some(scale) = scale {
+                // SAFETY: row + 8 <= n = gradient.len() (asserted by the caller).
+                let (gx, gy, gz) = unsafe { load_points_transposed(terms.gradient, row) };
+                rx = _mm256_fmadd_ps(gx, scale, rx);
+                ry = _mm256_fmadd_ps(gy, scale, ry);
+                rz = _mm256_fmadd_ps(gz, scale, rz);
+            }
+        }
+        if !terms.contact_slot.is_empty() {
+            let slots = &terms.contact_slot[row..row + SLICE];
+            // SAFETY: eight u32.
+            let all_free = unsafe {
+                let v = _mm256_loadu_si256(slots.as_ptr() as *const __m256i);
+                _mm256_movemask_epi8(_mm256_cmpeq_epi32(v, free)) == -1
+            };
+            if !all_free {
+                // The normal's component out of each row in contact (a zero normal elsewhere).
+                let normal = |lane: usize| match slots[lane] {
+                    u32::MAX => Vec3A::ZERO,
+                    s => terms.contact_normal[s as usize],
+                };
+                let normals: [Vec3A; SLICE] = std::array::from_fn(normal);
+                let axis = |a: usize| std::array::from_fn::<f32, SLICE, _>(|lane| normals[lane][a]);
+                let (x, y, z) = (axis(0), axis(1), axis(2));
+                // SAFETY: eight f32 from each array.
+                let (nx, ny, nz) =
+                    unsafe { (_mm256_loadu_ps(x.as_ptr()), _mm256_loadu_ps(y.as_ptr()), _mm256_loadu_ps(z.as_ptr())) };
+                let along = _mm256_fmadd_ps(rz, nz, _mm256_fmadd_ps(ry, ny, _mm256_mul_ps(rx, nx)));
+                rx = _mm256_fnmadd_ps(nx, along, rx);
+                ry = _mm256_fnmadd_ps(ny, along, ry);
+                rz = _mm256_fnmadd_ps(nz, along, rz);
+            }
+        }
+        // Pinned rows are zero.
+        let moving = _mm256_cmp_ps::<_CMP_NEQ_UQ>(inv_mass, _mm256_setzero_ps());
+        rx = _mm256_and_ps(rx, moving);
+        ry = _mm256_and_ps(ry, moving);
+        rz = _mm256_and_ps(rz, moving);
+        let dot = _mm256_fmadd_ps(xz, rz, _mm256_fmadd_ps(xy, ry, _mm256_mul_ps(xx, rx)));
+        dots_low = _mm256_add_pd(dots_low, _mm256_cvtps_pd(_mm256_castps256_ps128(dot)));
+        dots_high = _mm256_add_pd(dots_high, _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(dot)));
+        // The eight rows back as Vec3A (a zero fourth lane).
+        let zero = _mm256_setzero_ps();
+        let xy01 = _mm256_unpacklo_ps(rx, ry); // x0 y0 x1 y1 | x4 y4 x5 y5
+        let xy23 = _mm256_unpackhi_ps(rx, ry); // x2 y2 x3 y3 | x6 y6 x7 y7
+        let z01 = _mm256_unpacklo_ps(rz, zero); // z0 0 z1 0 | z4 0 z5 0
+        let z23 = _mm256_unpackhi_ps(rz, zero);
+        let rows_of = [
+            _mm256_shuffle_ps::<0x44>(xy01, z01), // row 0 | row 4
+            _mm256_shuffle_ps::<0xEE>(xy01, z01), // 1 | 5
+            _mm256_shuffle_ps::<0x44>(xy23, z23), // 2 | 6
+            _mm256_shuffle_ps::<0xEE>(xy23, z23), // 3 | 7
+        ];
+        let to = out[row - first..row - first + SLICE].as_mut_ptr() as *mut f32;
+        // SAFETY: eight Vec3A (16 aligned bytes each) of `out`.
+        unsafe {
+            for (lane, v) in rows_of.iter().enumerate() {
+                _mm_store_ps(to.add(4 * lane), _mm256_castps256_ps128(*v));
+                _mm_store_ps(to.add(4 * (lane + 4)), _mm256_extractf128_ps::<1>(*v));
+            }
         }
         row += SLICE;
     }
+    let mut lanes = [0.0f64; SLICE];
+    // SAFETY: four f64 into each half of the array.
+    unsafe {
+        _mm256_storeu_pd(lanes.as_mut_ptr(), dots_low);
+        _mm256_storeu_pd(lanes.as_mut_ptr().add(4), dots_high);
+    }
+    sum_lanes(lanes)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    /// Both paths of [`product_slices`] (the AVX2 one where the processor has it) from row
+    /// `from`: each row and the dot product.
+    fn both_products(
+        slices: &CouplingSlices,
+        input: &[Vec3A],
+        from: usize,
+        terms: &RowTerms,
+    ) -> Vec<(Vec<Vec3A>, f64)> {
+        let n = input.len();
+        let mut results = Vec::new();
+        let mut out = vec![Vec3A::splat(f32::NAN); n - from];
+        let dot = product_slices_scalar(&slices.offsets, &slices.groups, input, from..n, terms, &mut out);
+        results.push((out, dot));
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            let mut out = vec![Vec3A::splat(f32::NAN); n - from];
+            // SAFETY: the processor has AVX2 and FMA (checked above).
+            let dot = unsafe { product_slices_avx2(&slices.offsets, &slices.groups, input, from..n, terms, &mut out) };
+            results.push((out, dot));
+        }
+        results
+    }
+
     /// A random matrix with rows of 0 to 9 couplings and a row count that leaves the last slice
-    /// partly empty: the sliced sums (AVX2 where the processor has it, and the plain ones) agree
-    /// with a row-by-row sum up to rounding, and every row is reported once, in order.
+    /// partly empty, with random masses, some pinned rows, gas in two fragments (slices of one
+    /// fragment, mixed slices and rows without gas) and contacts on some rows: both paths of
+    /// the product agree with the product computed row by row from its definition, up to
+    /// rounding, as does the dot product.
     #[test]
-    fn sliced_sums_agree_with_row_by_row_sums() {
+    fn products_agree_with_the_matrix_row_by_row() {
+        // 104 rows: whole slices only, so the gradient of the last slice is loaded one point
+        // at a time (nothing follows it).
+        for n in [101, 104] {
+            check_products(n);
+        }
+    }
+
+    fn check_products(n: usize) {
         let mut unit = crate::body::test_randoms(0x2545_f491_4f6c_dd1d);
-        let n = 101;
         let mut row_offsets = vec![0u32];
         let mut rows: Vec<Vec<(Coupling, u32)>> = Vec::new();
         for i in 0..n {
@@ -519,26 +766,63 @@ mod tests {
             }
         }
         let input: Vec<Vec3A> = (0..n).map(|_| Vec3A::new(unit(), unit(), unit()) * 10.0).collect();
-        let expected: Vec<Vec3A> = rows
-            .iter()
-            .enumerate()
-            .map(|(i, row)| row.iter().map(|&(c, j)| c.rounded().apply(input[i] - input[j as usize])).sum())
+        let mass: Vec<f32> = (0..n).map(|_| 0.5 + unit().abs()).collect();
+        let inv_mass: Vec<f32> = (0..n).map(|i| if i % 13 == 5 { 0.0 } else { 1.0 / mass[i] }).collect();
+        // Rows 0-39 in fragment 0, 40-51 without gas, then alternating (mixed slices).
+        let fragment: Vec<u32> = (0..n as u32)
+            .map(|i| match i {
+                0..40 => 0,
+                40..52 => u32::MAX,
+                _ => [0, 1, u32::MAX][i as usize % 3],
+            })
             .collect();
-        let check = |got: &[(usize, Vec3A)], from: usize| {
-            assert_eq!(got.iter().map(|g| g.0).collect::<Vec<_>>(), (from..n).collect::<Vec<_>>());
-            for &(i, sum) in got {
-                let scale = 1.0 + rows[i].len() as f32 * 40.0;
-                assert!((sum - expected[i]).length() <= 1e-5 * scale, "row {i}: {sum} vs {}", expected[i]);
+        let gradient: Vec<Vec3> = (0..n).map(|_| Vec3::new(unit(), unit(), unit())).collect();
+        let gas_scale = [0.37f32, -1.25];
+        let normals = [Vec3A::Y, Vec3A::new(0.6, 0.8, 0.0)];
+        let contact_slot: Vec<u32> = (0..n).map(|i| if i % 11 == 3 { (i % 2) as u32 } else { u32::MAX }).collect();
+        let mut pinned_seen = false;
+        for (gas, contacts) in [(false, false), (true, false), (false, true), (true, true)] {
+            let terms = RowTerms {
+                mass: &mass,
+                inv_mass: &inv_mass,
+                fragment: if gas { &fragment } else { &[] },
+                gradient: if gas { &gradient } else { &[] },
+                gas_scale: &gas_scale,
+                contact_slot: if contacts { &contact_slot } else { &[] },
+                contact_normal: &normals,
+            };
+            let expected: Vec<Vec3A> = (0..n)
+                .map(|i| {
+                    let sum: Vec3A =
+                        rows[i].iter().map(|&(c, j)| c.rounded().apply(input[i] - input[j as usize])).sum();
+                    let mut row = input[i] * mass[i] + sum;
+                    if gas && fragment[i] != u32::MAX {
+                        row += Vec3A::from(gradient[i]) * gas_scale[fragment[i] as usize];
+                    }
+                    if contacts && contact_slot[i] != u32::MAX {
+                        let normal = normals[contact_slot[i] as usize];
+                        row -= normal * row.dot(normal);
+                    }
+                    if inv_mass[i] == 0.0 { Vec3A::ZERO } else { row }
+                })
+                .collect();
+            for from in [0, 48] {
+                let want_dot: f64 = (from..n).map(|i| input[i].dot(expected[i]) as f64).sum();
+                for (out, dot) in both_products(&slices, &input, from, &terms) {
+                    for (k, got) in out.iter().enumerate() {
+                        let (i, want) = (from + k, expected[from + k]);
+                        let scale = 1.0 + rows[i].len() as f32 * 40.0 + want.length();
+                        assert!((*got - want).length() <= 1e-5 * scale, "row {i}: {got} vs {want} ({gas}, {contacts})");
+                        if inv_mass[i] == 0.0 {
+                            assert_eq!(*got, Vec3A::ZERO);
+                            pinned_seen = true;
+                        }
+                    }
+                    assert!((dot - want_dot).abs() <= 1e-5 * (1.0 + want_dot.abs()), "{dot} vs {want_dot}");
+                }
             }
-        };
-        for from in [0, 48] {
-            let mut got = Vec::new();
-            for_each_row_sum(&slices.offsets, &slices.groups, &input, from..n, |i, s| got.push((i, s)));
-            check(&got, from);
-            let mut plain = Vec::new();
-            row_sums_scalar(&slices.offsets, &slices.groups, &input, from..n, |i, s| plain.push((i, s)));
-            check(&plain, from);
         }
+        assert!(pinned_seen);
         assert_eq!(group_range(&slices.offsets, 0..n), 0..slices.groups.len());
     }
 
@@ -585,6 +869,15 @@ mod tests {
             view.set_row(0, [(Coupling::new(Vec3A::X, 1.0, 1.0), 5)].into_iter());
         }
         let input = vec![Vec3A::ONE; 2];
-        for_each_row_sum(&slices.offsets, &slices.groups, &input, 0..2, |_, _| {});
+        let terms = RowTerms {
+            mass: &[1.0; 2],
+            inv_mass: &[1.0; 2],
+            fragment: &[],
+            gradient: &[],
+            gas_scale: &[],
+            contact_slot: &[],
+            contact_normal: &[],
+        };
+        product_slices(&slices.offsets, &slices.groups, &input, 0..2, &terms, &mut [Vec3A::ZERO; 2]);
     }
 }

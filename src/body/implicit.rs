@@ -22,7 +22,9 @@
 use glam::{Vec3, Vec3A};
 
 use super::coarse::{CoarseSpace, CoarseView};
-use super::coupling_slices::{CouplingGroup, CouplingSlices, SLICE, SliceRowsMut, for_each_row_sum, group_range};
+use super::coupling_slices::{
+    CouplingGroup, CouplingSlices, RowTerms, SLICE, SliceRowsMut, group_range, product_slices,
+};
 use super::energy;
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::{self, Gas};
@@ -503,8 +505,7 @@ struct ProductTask<'a> {
 
 /// Rows `first..` of `A input` for the system matrix `M - h² K - h D` (pinned rows zero, contact
 /// constraints filtered out when `contact` is not empty); `gas_scale` holds `h² P/V Σ g·input` per
-/// fragment ([`gas_scale`]). The couplings are summed eight rows at a time
-/// ([`for_each_row_sum`]).
+/// fragment ([`gas_scale`]). Eight rows at a time ([`product_slices`]).
 fn product_rows(
     sys: &System,
     contact: ContactRows,
@@ -514,61 +515,17 @@ fn product_rows(
     task: &mut ProductTask,
 ) {
     let model = sys.model;
-    let first = task.first;
-    let out = &mut *task.out;
-    for_each_row_sum(offsets, groups, input, first..first + out.len(), |i, sum| out[i - first] = sum);
-    // The rest of each row, with `Σ input·out` in four running sums (rows k mod 4, added in a
-    // fixed order: one chain of f64 additions made this loop as slow as the couplings' sums).
-    let rows = first..first + out.len();
-    let (mass, inv_mass, input_rows) = (&model.mass[rows.clone()], &model.inv_mass[rows.clone()], &input[rows.clone()]);
-    let fragment = sys.vertex_fragment.get(rows.clone()).unwrap_or(&[]);
-    let gradient = sys.gradient.get(rows.clone()).unwrap_or(&[]);
-    let contact = contact.rows(rows);
-    // One loop per combination of gas and contacts (the loop then tests neither per row, and
-    // the rows' slices are checked once: about 48 instructions per row before, cachegrind).
-    let gas = (fragment, gradient, gas_scale);
-    task.dot = match (fragment.is_empty(), contact.is_empty()) {
-        (true, true) => product_tail::<false, false>(out, input_rows, mass, inv_mass, gas, contact),
-        (true, false) => product_tail::<false, true>(out, input_rows, mass, inv_mass, gas, contact),
-        (false, true) => product_tail::<true, false>(out, input_rows, mass, inv_mass, gas, contact),
-        (false, false) => product_tail::<true, true>(out, input_rows, mass, inv_mass, gas, contact),
+    let rows = task.first..task.first + task.out.len();
+    let terms = RowTerms {
+        mass: model.mass,
+        inv_mass: model.inv_mass,
+        fragment: sys.vertex_fragment,
+        gradient: if sys.vertex_fragment.is_empty() { &[] } else { sys.gradient },
+        gas_scale,
+        contact_slot: contact.slot,
+        contact_normal: contact.normal,
     };
-}
-
-/// The rest of each row of a chunk of [`product_rows`] after the couplings' sums in `out` (every
-/// slice but `gas_scale` holds exactly the chunk's rows), with `Σ input·out` in four running
-/// sums (rows k mod 4, added in a fixed order: one chain of f64 additions made this loop as slow
-/// as the couplings' sums); returns that sum.
-#[inline(always)]
-fn product_tail<const GAS: bool, const CONTACT: bool>(
-    out: &mut [Vec3A],
-    input: &[Vec3A],
-    mass: &[f32],
-    inv_mass: &[f32],
-    (fragment, gradient, gas_scale): (&[u32], &[Vec3], &[f32]),
-    contact: ContactRows,
-) -> f64 {
-    let n = out.len();
-    assert!(input.len() == n && mass.len() == n && inv_mass.len() == n);
-    assert!(!GAS || (fragment.len() == n && gradient.len() == n));
-    assert!(!CONTACT || contact.slot.len() == n);
-    let mut dots = [0.0f64; 4];
-    for k in 0..n {
-        let xi = input[k];
-        let mut acc = xi * mass[k] + out[k];
-        if GAS && fragment[k] != u32::MAX {
-            acc += Vec3A::from(gradient[k]) * gas_scale[fragment[k] as usize];
-        }
-        if CONTACT {
-            acc = contact.apply(k, acc);
-        }
-        if inv_mass[k] == 0.0 {
-            acc = Vec3A::ZERO;
-        }
-        dots[k % 4] += xi.dot(acc) as f64;
-        out[k] = acc;
-    }
-    (dots[0] + dots[1]) + (dots[2] + dots[3])
+    task.dot = product_slices(offsets, groups, input, rows, &terms, task.out);
 }
 
 /// `Σ g·value(i)` over the vertices `rows`, per gas fragment (`vertex_fragment`, `gradient`),
