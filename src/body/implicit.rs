@@ -21,6 +21,7 @@
 
 use glam::{Vec3, Vec3A};
 
+use super::cg_vectors::residual_rows;
 use super::coarse::{CoarseSpace, CoarseView};
 use super::coupling_slices::{
     CouplingGroup, CouplingSlices, RowTerms, SLICE, SliceRowsMut, group_range, product_slices,
@@ -54,25 +55,25 @@ enum ContactFilter {
 /// (while anything touches an obstacle), and those passes are bound by the bytes they stream.
 /// Empty when nothing touches.
 #[derive(Clone, Copy, Default)]
-struct ContactRows<'a> {
-    slot: &'a [u32],
-    normal: &'a [Vec3A],
+pub(super) struct ContactRows<'a> {
+    pub slot: &'a [u32],
+    pub normal: &'a [Vec3A],
 }
 
 impl<'a> ContactRows<'a> {
-    fn is_empty(&self) -> bool {
+    pub fn is_empty(&self) -> bool {
         self.slot.is_empty()
     }
 
     /// The slots of the vertices `rows` (indexed from 0), or empty without contacts.
-    fn rows(self, rows: std::ops::Range<usize>) -> ContactRows<'a> {
+    pub fn rows(self, rows: std::ops::Range<usize>) -> ContactRows<'a> {
         ContactRows { slot: self.slot.get(rows).unwrap_or(&[]), normal: self.normal }
     }
 
     /// The `k`-th vertex's filter applied to `value`: its component along the contact normal
     /// removed (none when the vertex is free).
     #[inline(always)]
-    fn apply(&self, k: usize, value: Vec3A) -> Vec3A {
+    pub fn apply(&self, k: usize, value: Vec3A) -> Vec3A {
         let slot = self.slot[k];
         if slot == u32::MAX {
             value
@@ -546,41 +547,6 @@ fn gas_dots_range(
     run.flush(out);
 }
 
-/// `Δv += α p`, `r -= α A p`, `z = M⁻¹ r` (filtered by the contacts) on the rows `first..` of a
-/// chunk (`ap` holds the chunk's rows of `A p`); returns the chunk's `(r·r, r·z)`.
-#[allow(clippy::too_many_arguments)]
-fn residual_chunk(
-    first: usize,
-    (dv, r, z): (&mut [Vec3A], &mut [Vec3A], &mut [Vec3A]),
-    p: &[Vec3A],
-    ap: &[Vec3A],
-    inv_diag: &[SymmetricBlock],
-    contact: ContactRows,
-    alpha: f32,
-    any_contact: bool,
-) -> (f64, f64) {
-    let (mut rr, mut rz) = (0.0f64, 0.0f64);
-    // The chunk's rows, sliced once (no bounds check per vertex).
-    let n = dv.len();
-    let rows = first..first + n;
-    let (p, inv_diag) = (&p[rows.clone()], &inv_diag[rows.clone()]);
-    let contact = contact.rows(rows);
-    assert!(r.len() == n && z.len() == n && ap.len() == n);
-    for k in 0..n {
-        dv[k] += p[k] * alpha;
-        let ri = r[k] - ap[k] * alpha;
-        let mut zi = inv_diag[k].apply(ri);
-        if any_contact {
-            zi = contact.apply(k, zi);
-        }
-        r[k] = ri;
-        z[k] = zi;
-        rr += ri.length_squared() as f64;
-        rz += ri.dot(zi) as f64;
-    }
-    (rr, rz)
-}
-
 /// `r = rhs - A Δv`, `z = M⁻¹ r` (both filtered by the contacts) on the rows `first..` of a
 /// chunk (`ap` holds the chunk's rows of `A Δv`); returns the chunk's `r·z`.
 #[allow(clippy::too_many_arguments)]
@@ -1052,7 +1018,7 @@ impl Shared<'_> {
                             p.whole(),
                         )
                     };
-                    (rr[0], rz[0]) = residual_chunk(
+                    (rr[0], rz[0]) = residual_rows(
                         c * CHUNK,
                         (dv_rows, r_rows, z_rows),
                         p_all,

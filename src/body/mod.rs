@@ -13,6 +13,7 @@
 //!
 //! This module knows nothing of the C ABI.
 
+mod cg_vectors;
 mod cholesky;
 mod coarse;
 mod core_block;
