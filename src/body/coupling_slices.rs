@@ -492,7 +492,7 @@ fn sum_lanes(l: [f64; SLICE]) -> f64 {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-unsafe fn load_points_transposed(
+pub(crate) unsafe fn load_points_transposed(
     points: &[Vec3],
     first: usize,
 ) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
