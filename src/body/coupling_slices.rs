@@ -380,6 +380,41 @@ unsafe fn load_transposed(
     (x, y, z)
 }
 
+/// The eight consecutive `Vec3A` rows `first..first + 8` of `input`, as their x, y and z lanes
+/// ([`load_transposed`] without the indices: a product's own rows).
+///
+/// # Safety
+/// The processor must have AVX2; `first + 8 <= input.len()`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn load_rows_transposed(
+    input: &[Vec3A],
+    first: usize,
+) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+    use std::arch::x86_64::*;
+    // SAFETY: rows first..first + 8 (the caller's contract), 16 aligned bytes each.
+    let (r04, r15, r26, r37) = unsafe {
+        let base = input.as_ptr().add(first) as *const f32;
+        let row = |lane: usize| base.add(4 * lane);
+        (
+            _mm256_set_m128(_mm_load_ps(row(4)), _mm_load_ps(row(0))),
+            _mm256_set_m128(_mm_load_ps(row(5)), _mm_load_ps(row(1))),
+            _mm256_set_m128(_mm_load_ps(row(6)), _mm_load_ps(row(2))),
+            _mm256_set_m128(_mm_load_ps(row(7)), _mm_load_ps(row(3))),
+        )
+    };
+    let xy01 = _mm256_unpacklo_ps(r04, r15);
+    let xy23 = _mm256_unpacklo_ps(r26, r37);
+    let zw01 = _mm256_unpackhi_ps(r04, r15);
+    let zw23 = _mm256_unpackhi_ps(r26, r37);
+    (
+        _mm256_shuffle_ps::<0x44>(xy01, xy23),
+        _mm256_shuffle_ps::<0xEE>(xy01, xy23),
+        _mm256_shuffle_ps::<0x44>(zw01, zw23),
+    )
+}
+
 /// Eight bfloat16 to f32: widened to 32 bits and shifted into the upper half. (A function with
 /// the target feature, not a closure: a closure does not inherit it, and its intrinsics became
 /// calls that made the product 2.5 times slower.)
@@ -553,9 +588,14 @@ unsafe fn product_slices_avx2(
     while row < rows.end {
         let slice = row / SLICE;
         let lanes = (rows.end - row).min(SLICE);
-        let own: [u32; SLICE] = std::array::from_fn(|lane| (row + lane).min(n - 1) as u32);
-        // SAFETY: every index of `own` is below n (clamped above).
-        let (xx, xy, xz) = unsafe { load_transposed(input, &own) };
+        let (xx, xy, xz) = if lanes == SLICE {
+            // SAFETY: rows row..row + 8 are rows of `input` (row + 8 <= rows.end <= n).
+            unsafe { load_rows_transposed(input, row) }
+        } else {
+            let own: [u32; SLICE] = std::array::from_fn(|lane| (row + lane).min(n - 1) as u32);
+            // SAFETY: every index of `own` is below n (clamped above).
+            unsafe { load_transposed(input, &own) }
+        };
         let (mut ax, mut ay, mut az) = (_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps());
         for group in &groups[offsets[slice] as usize..offsets[slice + 1] as usize] {
             // SAFETY: `group.other` is 32 aligned bytes (the group is 32-byte aligned, the field

@@ -6,11 +6,14 @@
 //! `-(P/V) ∂V/∂x ∂V/∂xᵀ` of `∂(P ∂V/∂x)/∂x` (the indefinite `P ∂²V/∂x²` part is left out);
 //! D is the spring damping `K_d u uᵀ`. Pinned vertices are filtered out of the system.
 //!
-//! Layout for speed: the system is gathered per vertex, never scattered. One pass over each
-//! vertex's springs (in the CSR order of `Springs::adjacency`) computes the spring forces, the
-//! right side, the block-Jacobi preconditioner and the coupling block of every (vertex, spring)
-//! pair, stored in that same order, so each product with the matrix streams through memory once.
-//! Both passes run in fixed chunks of vertices, so the result does not depend on the thread count.
+//! Layout for speed: the system is gathered per vertex, never scattered. Each spring's terms are
+//! computed once (`spring_terms`); one pass over the vertices, eight at a time (a slice of the
+//! coupling layout, `spring_sums`), gathers their springs' terms into the right side and the
+//! block-Jacobi preconditioner and writes the coupling block of every (vertex, spring) pair into
+//! the slices (`coupling_slices`), so each product with the matrix streams through memory once.
+//! The products and the iteration's vector passes also go eight rows (or two) at a time where
+//! the processor has AVX2. Every pass runs in fixed chunks of vertices, so the result does not
+//! depend on the thread count.
 //!
 //! Preconditioner: two levels, added. The 3x3 block of each vertex (block Jacobi) resolves what
 //! happens at one vertex; the coarse level (`coarse`: aggregates of about 16 vertices, a constant
