@@ -365,19 +365,38 @@ unsafe fn load_transposed(
     let base = input.as_ptr() as *const f32;
     // SAFETY: each index is a row of `input` (the caller's contract): 16 aligned bytes.
     let row = |lane: usize| unsafe { _mm_load_ps(base.add(4 * rows[lane] as usize)) };
-    let r04 = _mm256_set_m128(row(4), row(0));
-    let r15 = _mm256_set_m128(row(5), row(1));
-    let r26 = _mm256_set_m128(row(6), row(2));
-    let r37 = _mm256_set_m128(row(7), row(3));
+    let (x, y, z, _) = transpose_rows(
+        _mm256_set_m128(row(4), row(0)),
+        _mm256_set_m128(row(5), row(1)),
+        _mm256_set_m128(row(6), row(2)),
+        _mm256_set_m128(row(7), row(3)),
+    );
+    (x, y, z)
+}
+
+/// Eight rows of four f32, given as the pairs (0 | 4), (1 | 5), (2 | 6), (3 | 7) of 128-bit
+/// halves, as their four lanes: x, y, z and w of rows 0 to 7 in order (callable where AVX2 is
+/// enabled).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) fn transpose_rows(
+    r04: std::arch::x86_64::__m256,
+    r15: std::arch::x86_64::__m256,
+    r26: std::arch::x86_64::__m256,
+    r37: std::arch::x86_64::__m256,
+) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256, std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+    use std::arch::x86_64::*;
     let xy01 = _mm256_unpacklo_ps(r04, r15); // x0 x1 y0 y1 | x4 x5 y4 y5
     let xy23 = _mm256_unpacklo_ps(r26, r37); // x2 x3 y2 y3 | x6 x7 y6 y7
     let zw01 = _mm256_unpackhi_ps(r04, r15);
     let zw23 = _mm256_unpackhi_ps(r26, r37);
-    let x = _mm256_shuffle_ps::<0x44>(xy01, xy23);
-    let y = _mm256_shuffle_ps::<0xEE>(xy01, xy23);
-    let z = _mm256_shuffle_ps::<0x44>(zw01, zw23);
-    // Lane order of x: 0 1 2 3 | 4 5 6 7 (the halves were built from rows 0-3 and 4-7).
-    (x, y, z)
+    (
+        _mm256_shuffle_ps::<0x44>(xy01, xy23),
+        _mm256_shuffle_ps::<0xEE>(xy01, xy23),
+        _mm256_shuffle_ps::<0x44>(zw01, zw23),
+        _mm256_shuffle_ps::<0xEE>(zw01, zw23),
+    )
 }
 
 /// The eight consecutive `Vec3A` rows `first..first + 8` of `input`, as their x, y and z lanes
@@ -404,15 +423,8 @@ unsafe fn load_rows_transposed(
             _mm256_set_m128(_mm_load_ps(row(7)), _mm_load_ps(row(3))),
         )
     };
-    let xy01 = _mm256_unpacklo_ps(r04, r15);
-    let xy23 = _mm256_unpacklo_ps(r26, r37);
-    let zw01 = _mm256_unpackhi_ps(r04, r15);
-    let zw23 = _mm256_unpackhi_ps(r26, r37);
-    (
-        _mm256_shuffle_ps::<0x44>(xy01, xy23),
-        _mm256_shuffle_ps::<0xEE>(xy01, xy23),
-        _mm256_shuffle_ps::<0x44>(zw01, zw23),
-    )
+    let (x, y, z, _) = transpose_rows(r04, r15, r26, r37);
+    (x, y, z)
 }
 
 /// Eight bfloat16 to f32: widened to 32 bits and shifted into the upper half. (A function with
@@ -545,15 +557,8 @@ pub(crate) unsafe fn load_points_transposed(
                 _mm256_set_m128(_mm_loadu_ps(row(7)), _mm_loadu_ps(row(3))),
             )
         };
-        let xy01 = _mm256_unpacklo_ps(r04, r15);
-        let xy23 = _mm256_unpacklo_ps(r26, r37);
-        let zw01 = _mm256_unpackhi_ps(r04, r15);
-        let zw23 = _mm256_unpackhi_ps(r26, r37);
-        (
-            _mm256_shuffle_ps::<0x44>(xy01, xy23),
-            _mm256_shuffle_ps::<0xEE>(xy01, xy23),
-            _mm256_shuffle_ps::<0x44>(zw01, zw23),
-        )
+        let (x, y, z, _) = transpose_rows(r04, r15, r26, r37);
+        (x, y, z)
     } else {
         let p = &points[first..first + SLICE];
         let axis = |a: usize| std::array::from_fn::<f32, SLICE, _>(|lane| p[lane][a]);

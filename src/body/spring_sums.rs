@@ -15,6 +15,8 @@
 
 use glam::{Vec3, Vec3A};
 
+#[cfg(target_arch = "x86_64")]
+use super::coupling_slices::transpose_rows;
 use super::coupling_slices::{CouplingGroup, PackedCoupling, RowMut, SLICE};
 use super::spring_terms::SpringTerms;
 use super::symmetric_block::SymmetricParts;
@@ -195,16 +197,8 @@ unsafe fn load_terms(
             _mm256_set_m128(_mm_loadu_ps(row(7)), _mm_loadu_ps(row(3))),
         )
     };
-    let xy01 = _mm256_unpacklo_ps(r04, r15); // x0 x1 y0 y1 | x4 x5 y4 y5
-    let xy23 = _mm256_unpacklo_ps(r26, r37); // x2 x3 y2 y3 | x6 x7 y6 y7
-    let ze01 = _mm256_unpackhi_ps(r04, r15); // z0 z1 e0 e1 | z4 z5 e4 e5
-    let ze23 = _mm256_unpackhi_ps(r26, r37);
-    (
-        _mm256_shuffle_ps::<0x44>(xy01, xy23),
-        _mm256_shuffle_ps::<0xEE>(xy01, xy23),
-        _mm256_shuffle_ps::<0x44>(ze01, ze23),
-        _mm256_shuffle_ps::<0xEE>(ze01, ze23),
-    )
+    // The fourth lane of each record is its extension.
+    transpose_rows(r04, r15, r26, r37)
 }
 
 /// The blocks of eight `SpringTerms` (bytes 16 to 24), as two words per lane: `x | y << 16` and
