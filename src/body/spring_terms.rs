@@ -4,6 +4,8 @@
 
 use glam::{Vec3, Vec3A};
 
+#[cfg(target_arch = "x86_64")]
+use super::coupling_slices::transpose_rows;
 use super::coupling_slices::{Coupling, PackedCoupling};
 #[cfg(target_arch = "x86_64")]
 use super::springs::MIN_LENGTH_RATIO;
@@ -107,19 +109,13 @@ unsafe fn load_points(
     // SAFETY: point i is followed by point i + 1 (checked above), so the 16 bytes from its start
     // are inside the slice.
     let load = |lane: usize| unsafe { _mm_loadu_ps(base.add(3 * index[lane] as usize)) };
-    let r04 = _mm256_set_m128(load(4), load(0));
-    let r15 = _mm256_set_m128(load(5), load(1));
-    let r26 = _mm256_set_m128(load(6), load(2));
-    let r37 = _mm256_set_m128(load(7), load(3));
-    let xy01 = _mm256_unpacklo_ps(r04, r15);
-    let xy23 = _mm256_unpacklo_ps(r26, r37);
-    let zw01 = _mm256_unpackhi_ps(r04, r15);
-    let zw23 = _mm256_unpackhi_ps(r26, r37);
-    Some((
-        _mm256_shuffle_ps::<0x44>(xy01, xy23),
-        _mm256_shuffle_ps::<0xEE>(xy01, xy23),
-        _mm256_shuffle_ps::<0x44>(zw01, zw23),
-    ))
+    let (x, y, z, _) = transpose_rows(
+        _mm256_set_m128(load(4), load(0)),
+        _mm256_set_m128(load(5), load(1)),
+        _mm256_set_m128(load(6), load(2)),
+        _mm256_set_m128(load(7), load(3)),
+    );
+    Some((x, y, z))
 }
 
 /// Eight f32 rounded to bfloat16 as `coupling_slices::to_bf16` rounds one (ties to even, a NaN
