@@ -31,7 +31,7 @@ use super::coupling_slices::load_points_transposed;
 use super::coupling_slices::{
     CouplingGroup, CouplingSlices, RowTerms, SLICE, SliceRowsMut, group_range, product_slices,
 };
-use super::energy;
+use super::energy::{self, springs_energy_strain};
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::{self, Gas};
 use super::obstacles::{Obstacle, resolve, touching};
@@ -1444,16 +1444,12 @@ pub(crate) fn substep(
                     let terms = unsafe { shared.terms.part(range.clone()) };
                     spring_terms_range(&spring_input, first, terms);
                     if energies {
-                        let (mut spring, mut strain) = (0.0f64, 0.0f32);
-                        for (t, &rest) in terms.iter().zip(&model.springs.rest[range]) {
-                            // `springs::spring_energy` and `spring_strain` of the same extension.
-                            let stretch = t.extension as f64;
-                            spring += 0.5 * ks as f64 * stretch * stretch;
-                            strain = strain.max(t.extension / rest);
-                        }
+                        // The extensions of `springs::spring_extension` (the same bits), summed as
+                        // `energy::state_energies` sums them.
+                        let sums = springs_energy_strain(|k| terms[k].extension, &model.springs.rest[range], ks);
                         // SAFETY: this chunk's slot (the spring chunks are the energy's), written
                         // by this member alone.
-                        unsafe { end_springs.part(c..c + 1)[0] = (spring, strain) };
+                        unsafe { end_springs.part(c..c + 1)[0] = sums };
                     }
                     return;
                 }

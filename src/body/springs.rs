@@ -86,15 +86,15 @@ pub(crate) fn spring_force(xi: Vec3, xj: Vec3, vi: Vec3, vj: Vec3, rest: f32, ks
     u * (ks * (len - rest) + kd * (vj - vi).dot(u))
 }
 
-/// Spring energy `K_s (|d| - L0)^2 / 2`, J.
-pub(crate) fn spring_energy(xi: Vec3, xj: Vec3, rest: f32, ks: f32) -> f64 {
-    let stretch = ((xj - xi).length() - rest) as f64;
-    0.5 * ks as f64 * stretch * stretch
+/// Extension `|d| - L0` (m): the spring energy is `K_s e²/2` (`energy::springs_energy_strain`),
+/// the strain `e / L0`.
+pub(crate) fn spring_extension(xi: Vec3, xj: Vec3, rest: f32) -> f32 {
+    (xj - xi).length() - rest
 }
 
 /// Strain `(|d| - L0)/L0`.
 pub(crate) fn spring_strain(xi: Vec3, xj: Vec3, rest: f32) -> f32 {
-    ((xj - xi).length() - rest) / rest
+    spring_extension(xi, xj, rest) / rest
 }
 
 /// The stiffness block `B = ∂f_i/∂x_j = a I + b u uᵀ` of a spring, returned as `(a, b, u)`:
@@ -135,7 +135,10 @@ mod tests {
         for axis in 0..3 {
             let mut e = Vec3::ZERO;
             e[axis] = h;
-            let fd = (spring_energy(xi + e, xj, rest, ks) - spring_energy(xi - e, xj, rest, ks)) / (2.0 * h as f64);
+            let energy = |xi: Vec3| {
+                crate::body::energy::springs_energy_strain(|_| spring_extension(xi, xj, rest), &[rest], ks).0
+            };
+            let fd = (energy(xi + e) - energy(xi - e)) / (2.0 * h as f64);
             assert!((fd + f[axis] as f64).abs() < 1e-2 * (1.0 + fd.abs()), "axis {axis}: {fd} vs {}", f[axis]);
         }
     }
