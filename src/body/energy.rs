@@ -8,9 +8,30 @@ use super::gas::{FACE_CHUNK, Gas};
 use super::springs::{Springs, spring_extension};
 use crate::parallel::WorkerPool;
 
-/// Kinetic energy `Σ m v²/2`, J.
+/// Kinetic energy `Σ m v²/2`, J ([`lane_sum`]).
 pub(crate) fn kinetic(mass: &[f32], v: &[Vec3]) -> f64 {
-    mass.iter().zip(v).map(|(&m, v)| 0.5 * m as f64 * v.as_dvec3().length_squared()).sum()
+    let v = &v[..mass.len()];
+    lane_sum(mass.len(), |k| 0.5 * mass[k] as f64 * v[k].as_dvec3().length_squared())
+}
+
+/// `Σ term(k)` over `0..count` in [`ENERGY_LANES`] running sums (term k in sum k mod 8, added
+/// pairwise at the end), as [`springs_energy_strain`] sums: with one running sum each term
+/// waited for the last one's addition, which set the pace of these short per-vertex terms.
+#[inline]
+fn lane_sum(count: usize, term: impl Fn(usize) -> f64) -> f64 {
+    let mut sums = [0.0f64; ENERGY_LANES];
+    for block in (0..count).step_by(ENERGY_LANES) {
+        for (lane, sum) in sums.iter_mut().enumerate().take(count - block) {
+            *sum += term(block + lane);
+        }
+    }
+    pairwise(&sums)
+}
+
+/// `((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7))`.
+fn pairwise(sums: &[f64; ENERGY_LANES]) -> f64 {
+    let four = |e: &[f64]| (e[0] + e[1]) + (e[2] + e[3]);
+    four(&sums[..4]) + four(&sums[4..])
 }
 
 /// Springs per parallel chunk (fixed, so the sums do not depend on the thread count); also the
@@ -51,9 +72,7 @@ pub(crate) fn springs_energy_strain(extension: impl Fn(usize) -> f32, rest: &[f3
             strain[lane] = strain[lane].max(e / rest);
         }
     }
-    let sum = |e: &[f64]| (e[0] + e[1]) + (e[2] + e[3]);
-    let energy = sum(&energy[..4]) + sum(&energy[4..]);
-    (energy, strain.iter().fold(0.0f32, |a, &b| a.max(b)))
+    (pairwise(&energy), strain.iter().fold(0.0f32, |a, &b| a.max(b)))
 }
 
 /// Vertices per chunk of [`state_energies`].
@@ -119,8 +138,8 @@ pub(crate) fn state_energies(
 
 /// Gravitational energy `-Σ m g·x`, J.
 pub(crate) fn gravity(mass: &[f32], x: &[Vec3], g: Vec3) -> f64 {
-    let g = g.as_dvec3();
-    -mass.iter().zip(x).map(|(&m, x)| m as f64 * g.dot(x.as_dvec3())).sum::<f64>()
+    let (g, x) = (g.as_dvec3(), &x[..mass.len()]);
+    -lane_sum(mass.len(), |k| mass[k] as f64 * g.dot(x[k].as_dvec3()))
 }
 
 /// Total momentum `Σ m v`, kg m/s.
@@ -145,6 +164,28 @@ pub(crate) fn spring_rate_bound(springs: &Springs, inv_mass: &[f32]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Kinetic and gravitational energy against the plain sums, for 0 to 21 vertices (on both
+    /// sides of a multiple of the running sums); one vertex's is its term exactly.
+    #[test]
+    fn vertex_energies_are_the_sums_of_their_terms() {
+        let mut unit = crate::body::test_randoms(0xe4e7_9ee5_0002);
+        let g = Vec3::new(0.0, -9.81, 0.5);
+        for n in 0..22 {
+            let mass: Vec<f32> = (0..n).map(|_| 0.1 + unit().abs()).collect();
+            let v: Vec<Vec3> = (0..n).map(|_| Vec3::new(unit(), unit(), unit()) * 3.0).collect();
+            let x: Vec<Vec3> = (0..n).map(|_| Vec3::new(unit(), 1.0 + unit(), unit())).collect();
+            let want_kinetic: f64 = (0..n).map(|k| 0.5 * mass[k] as f64 * v[k].as_dvec3().length_squared()).sum();
+            let want_gravity: f64 = -(0..n).map(|k| mass[k] as f64 * g.as_dvec3().dot(x[k].as_dvec3())).sum::<f64>();
+            let (kinetic, gravity) = (kinetic(&mass, &v), gravity(&mass, &x, g));
+            assert!((kinetic - want_kinetic).abs() <= 1e-12 * want_kinetic.abs().max(1e-300), "{n}");
+            assert!((gravity - want_gravity).abs() <= 1e-12 * want_gravity.abs().max(1e-300), "{n}");
+            if n == 1 {
+                assert_eq!(kinetic.to_bits(), want_kinetic.to_bits());
+                assert_eq!(gravity.to_bits(), want_gravity.to_bits());
+            }
+        }
+    }
 
     /// Against the plain sum and maximum, for counts on both sides of a multiple of the running
     /// sums (0 to 21 springs), stretched and compressed: the largest strain is exact (0 when

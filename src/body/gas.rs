@@ -84,8 +84,9 @@ fn tet(o: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
 }
 
 /// Adds each face's `6 V` term (its tetrahedron with its fragment's origin) into `six_v`, in
-/// face order: four faces at a time in f64 with AVX2 where the processor has it (the same
-/// operations in the same order as [`tet`], so the same bits, tested). One face at a time this
+/// face order ([`TetSums`]): four faces at a time in f64 with AVX2 where the processor has it
+/// (the same operations in the same order as [`tet`] and the same sums, so the same bits,
+/// tested). One face at a time this
 /// was about 60 instructions a face, most of them gathering and widening the corners.
 fn add_face_tets(x: &[Vec3], origin: &[DVec3], faces: &[[u32; 3]], face_fragment: &[u32], six_v: &mut [f64]) {
     #[cfg(target_arch = "x86_64")]
@@ -98,10 +99,77 @@ fn add_face_tets(x: &[Vec3], origin: &[DVec3], faces: &[[u32; 3]], face_fragment
 }
 
 fn add_face_tets_scalar(x: &[Vec3], origin: &[DVec3], faces: &[[u32; 3]], face_fragment: &[u32], six_v: &mut [f64]) {
-    for (t, &frag) in faces.iter().zip(face_fragment) {
+    let mut sums = TetSums::default();
+    add_face_tets_from(&mut sums, 0, x, origin, faces, face_fragment, six_v);
+    sums.flush(six_v);
+}
+
+/// The faces from `first` of the call's (`faces` starts there) into `sums` one at a time.
+fn add_face_tets_from(
+    sums: &mut TetSums,
+    first: usize,
+    x: &[Vec3],
+    origin: &[DVec3],
+    faces: &[[u32; 3]],
+    face_fragment: &[u32],
+    six_v: &mut [f64],
+) {
+    for (k, (t, &frag)) in faces.iter().zip(face_fragment).enumerate() {
         let o = origin[frag as usize];
-        six_v[frag as usize] +=
-            tet(o, x[t[0] as usize].as_dvec3(), x[t[1] as usize].as_dvec3(), x[t[2] as usize].as_dvec3());
+        let term = tet(o, x[t[0] as usize].as_dvec3(), x[t[1] as usize].as_dvec3(), x[t[2] as usize].as_dvec3());
+        sums.add(first + k, frag, term, six_v);
+    }
+}
+
+/// Faces per run of [`TetSums`].
+const TET_LANES: usize = 4;
+
+/// The running sums of [`add_face_tets`]: over a run of faces of one fragment, face k of the
+/// call in sum k mod 4, the four added pairwise into the fragment's total when the run ends.
+/// One running sum in memory (`six_v[fragment] += term`) made every face wait for the last
+/// one's load, addition and store.
+#[derive(Default)]
+struct TetSums {
+    /// The run's fragment, None before the first face.
+    fragment: Option<u32>,
+    lanes: [f64; TET_LANES],
+}
+
+impl TetSums {
+    /// Adds face k's term (k counted from the start of the call).
+    #[inline(always)]
+    fn add(&mut self, k: usize, fragment: u32, term: f64, six_v: &mut [f64]) {
+        self.enter(fragment, six_v);
+        self.lanes[k % TET_LANES] += term;
+    }
+
+    /// Adds four faces' terms, from a face k with k mod 4 = 0, all of `fragment`: lane l's
+    /// term into sum l, as four calls of [`TetSums::add`] would.
+    #[inline(always)]
+    fn add_four(&mut self, fragment: u32, terms: [f64; TET_LANES], six_v: &mut [f64]) {
+        self.enter(fragment, six_v);
+        for (sum, term) in self.lanes.iter_mut().zip(terms) {
+            *sum += term;
+        }
+    }
+
+    /// Ends the run unless it is of `fragment`, and starts one of `fragment` from zero.
+    #[inline(always)]
+    fn enter(&mut self, fragment: u32, six_v: &mut [f64]) {
+        if self.fragment != Some(fragment) {
+            self.flush(six_v);
+            self.fragment = Some(fragment);
+            self.lanes = [0.0; TET_LANES];
+        }
+    }
+
+    /// Adds the run's sums into its fragment's total and ends it.
+    #[inline(always)]
+    fn flush(&mut self, six_v: &mut [f64]) {
+        if let Some(f) = self.fragment.take() {
+            let l = self.lanes;
+            six_v[f as usize] += (l[0] + l[1]) + (l[2] + l[3]);
+        }
     }
 }
 
@@ -160,6 +228,7 @@ unsafe fn add_face_tets_avx2(
     // The last point's 16-byte load would read past the slice; groups touching it go one at a
     // time.
     let last = x.len().saturating_sub(1) as u32;
+    let mut sums = TetSums::default();
     let mut k = 0;
     while k + 4 <= faces.len() {
         let group: &[[u32; 3]; 4] = faces[k..k + 4].try_into().expect("four faces");
@@ -176,7 +245,7 @@ unsafe fn add_face_tets_avx2(
             last > 0 && _mm_movemask_epi8(_mm_cmpeq_epi32(_mm_max_epu32(max, bound), bound)) == 0xFFFF
         };
         if !inside {
-            add_face_tets_scalar(x, origin, group, frags, six_v);
+            add_face_tets_from(&mut sums, k, x, origin, group, frags, six_v);
             k += 4;
             continue;
         }
@@ -210,12 +279,17 @@ unsafe fn add_face_tets_avx2(
         let mut terms = [0.0f64; 4];
         // SAFETY: an unaligned store into four local f64.
         unsafe { _mm256_storeu_pd(terms.as_mut_ptr(), volume) };
-        for (&frag, term) in frags.iter().zip(terms) {
-            six_v[frag as usize] += term;
+        if frags[1..].iter().all(|&f| f == frags[0]) {
+            sums.add_four(frags[0], terms, six_v);
+        } else {
+            for (lane, (&frag, term)) in frags.iter().zip(terms).enumerate() {
+                sums.add(k + lane, frag, term, six_v);
+            }
         }
         k += 4;
     }
-    add_face_tets_scalar(x, origin, &faces[k..], &face_fragment[k..], six_v);
+    add_face_tets_from(&mut sums, k, x, origin, &faces[k..], &face_fragment[k..], six_v);
+    sums.flush(six_v);
 }
 
 /// Point `i` of `x` as a `Vec3A`: one unaligned 16-byte load where a point follows it (the
@@ -809,15 +883,26 @@ mod tests {
         let x: Vec<Vec3> = (0..n).map(|_| Vec3::new(unit(), unit(), unit()) * 5.0 + Vec3::splat(100.0)).collect();
         let faces: Vec<[u32; 3]> =
             (0..103u32).map(|k| [(k * 7) % n as u32, (k * 11 + 3) % n as u32, (k * 13 + 5) % n as u32]).collect();
-        let fragments: Vec<u32> = (0..faces.len()).map(|k| (k % 5 == 0) as u32).collect();
         assert!(faces.iter().flatten().any(|&i| i as usize == n - 1));
         let origin = [DVec3::new(100.0, 101.0, 99.0), DVec3::new(0.25, -3.0, 7.0)];
-        for first in [0, 1, 6] {
-            let (mut fast, mut plain) = ([0.0f64; 2], [0.0f64; 2]);
-            add_face_tets(&x, &origin, &faces[first..], &fragments[first..], &mut fast);
-            add_face_tets_scalar(&x, &origin, &faces[first..], &fragments[first..], &mut plain);
-            assert_eq!(fast.map(f64::to_bits), plain.map(f64::to_bits));
-            assert!(plain.iter().all(|v| *v != 0.0));
+        // Fragments alternating often (mixed groups of four), and in long runs (whole groups).
+        for fragment_of in [|k: usize| (k % 5 == 0) as u32, |k: usize| ((k / 37) % 2) as u32] {
+            let fragments: Vec<u32> = (0..faces.len()).map(fragment_of).collect();
+            for first in [0, 1, 6] {
+                let (mut fast, mut plain) = ([0.0f64; 2], [0.0f64; 2]);
+                add_face_tets(&x, &origin, &faces[first..], &fragments[first..], &mut fast);
+                add_face_tets_scalar(&x, &origin, &faces[first..], &fragments[first..], &mut plain);
+                assert_eq!(fast.map(f64::to_bits), plain.map(f64::to_bits));
+                // And the sums are the faces' terms added one by one, up to rounding.
+                let mut one_by_one = [0.0f64; 2];
+                for (t, &f) in faces[first..].iter().zip(&fragments[first..]) {
+                    let p = |i: u32| x[i as usize].as_dvec3();
+                    one_by_one[f as usize] += tet(origin[f as usize], p(t[0]), p(t[1]), p(t[2]));
+                }
+                for (got, want) in plain.iter().zip(one_by_one) {
+                    assert!(*got != 0.0 && (got - want).abs() <= 1e-9 * want.abs(), "{got} vs {want}");
+                }
+            }
         }
     }
 
