@@ -516,13 +516,21 @@ impl Gas {
                     *g = Vec3::ZERO;
                     continue;
                 }
+                // In two running sums (even and odd corners): with one, each corner waited for
+                // the last one's addition, which set the pace of this pass.
                 let xv = point(x, v);
-                let mut across_sum = Vec3A::ZERO;
-                for corner in fan {
+                let across = |corner: &Corner| {
                     let (b, c) = (point(x, corner.next as usize), point(x, corner.prev as usize));
-                    across_sum += (b - xv).cross(c - xv);
+                    (b - xv).cross(c - xv)
+                };
+                let (mut even, mut odd) = (Vec3A::ZERO, Vec3A::ZERO);
+                let pairs = fan.chunks_exact(2);
+                let last = pairs.remainder().first().map_or(Vec3A::ZERO, across);
+                for pair in pairs {
+                    even += across(&pair[0]);
+                    odd += across(&pair[1]);
                 }
-                *g = Vec3::from(across_sum * (1.0 / 6.0));
+                *g = Vec3::from(((even + last) + odd) * (1.0 / 6.0));
                 continue;
             }
             for corner in fan {
