@@ -429,7 +429,7 @@ impl Cholesky {
             };
             // SAFETY: the factor's columns are its rows, and y has them all (checked by the
             // caller).
-            *o = unsafe { s.sum(y, &self.row_col[entries.clone()], &self.row_val[entries]) };
+            *o = unsafe { s.sum::<true>(y, &self.row_col[entries.clone()], &self.row_val[entries]) };
         }
     }
 
@@ -458,7 +458,7 @@ impl Cholesky {
             let entries = split[1] as usize..self.row_ptr[k + 1] as usize;
             // SAFETY: the factor's columns are its rows, and y has them all (checked by the
             // caller).
-            let sum = unsafe { s.sum(y, &self.row_col[entries.clone()], &self.row_val[entries]) };
+            let sum = unsafe { s.sum::<true>(y, &self.row_col[entries.clone()], &self.row_val[entries]) };
             y[k] = (((y[k] - parts[0][t]) - parts[1][t]) - sum) * self.inv_diag[k];
         }
     }
@@ -512,7 +512,7 @@ impl Cholesky {
         for k in part.separator as usize..part.end as usize {
             let entries = self.row_ptr[k] as usize..self.row_ptr[k + 1] as usize;
             // SAFETY: the factor's columns are its rows, and y has them all (checked above).
-            let sum = unsafe { s.sum(y, &self.row_col[entries.clone()], &self.row_val[entries]) };
+            let sum = unsafe { s.sum::<true>(y, &self.row_col[entries.clone()], &self.row_val[entries]) };
             y[k] = (y[k] - sum) * self.inv_diag[k];
         }
     }
@@ -548,7 +548,7 @@ impl Cholesky {
         for k in (part.separator as usize..part.end as usize).rev() {
             let entries = self.col_ptr[k] as usize..self.col_ptr[k + 1] as usize;
             // SAFETY: the factor's rows, and y has them all (checked above).
-            let sum = unsafe { s.sum(y, &self.col_row[entries.clone()], &self.col_val[entries]) };
+            let sum = unsafe { s.sum::<false>(y, &self.col_row[entries.clone()], &self.col_val[entries]) };
             y[k] = (y[k] - sum) * self.inv_diag[k];
         }
     }
@@ -570,13 +570,17 @@ impl WeightedSum {
     /// # Safety
     /// Every index must be below `y.len()` (the factor's entries are below its `len()`, see
     /// [`Cholesky::factor`], and the solves check that `y` has that many rows).
+    ///
+    /// `RECENT_LAST`: whether the entries a triangular solve has just solved (the rows nearest
+    /// the one it is solving) are the last entries (forward, by rows) or the first (backward, by
+    /// columns); the AVX2 kernel adds them last ([`weighted_sum_avx2_fma`]).
     #[inline(always)]
-    unsafe fn sum(self, y: &[Vec3A], index: &[u32], value: &[f32]) -> Vec3A {
+    unsafe fn sum<const RECENT_LAST: bool>(self, y: &[Vec3A], index: &[u32], value: &[f32]) -> Vec3A {
         #[cfg(target_arch = "x86_64")]
         if self.avx2_fma {
             // SAFETY: the processor has AVX2 and FMA (`avx2_fma` is set only after checking it);
             // the indices as the caller promises.
-            return unsafe { weighted_sum_avx2_fma(y, index, value) };
+            return unsafe { weighted_sum_avx2_fma::<RECENT_LAST>(y, index, value) };
         }
         weighted_sum(y, index, value)
     }
@@ -609,14 +613,28 @@ fn weighted_sum(y: &[Vec3A], index: &[u32], value: &[f32]) -> Vec3A {
 /// half the instructions of the plain loop, which loads, checks, broadcasts, multiplies and
 /// adds each entry alone.
 ///
+/// The [`RECENT`] entries nearest the row being solved (the last ones with `RECENT_LAST`, else
+/// the first) are left out of those sums and added one at a time after them, the nearest last.
+/// A triangular solve's row needs the rows just before it, and its sum then waits for them only
+/// through those few additions, not through the whole reduction of the running sums: the other
+/// entries were solved earlier, and the processor sums them ahead while the rows before are
+/// still being solved. On the issue-5 balloon (benches/body_balloon.rs, one thread, alternating
+/// runs) the mean step went from 1.80 to 1.72 ms with the same CG iterations (6.3 a step).
+/// Also tried: one such entry (1.77 against 1.74 ms with two in the same runs), four (1.78
+/// against 1.75), and two with `(rhs - Σ) inv` taken before them so that each costs one fused
+/// multiply-add by `value inv` on the way to the solved row (1.76 against 1.72): not kept.
+///
 /// # Safety
 /// The processor must have AVX2 and FMA; every index must be below `y.len()`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-unsafe fn weighted_sum_avx2_fma(y: &[Vec3A], index: &[u32], value: &[f32]) -> Vec3A {
+unsafe fn weighted_sum_avx2_fma<const RECENT_LAST: bool>(y: &[Vec3A], index: &[u32], value: &[f32]) -> Vec3A {
     use std::arch::x86_64::*;
     let n = index.len().min(value.len());
+    let recent = n.min(RECENT);
+    // The entries in the running sums: `first..first + summed`.
+    let (first, summed) = if RECENT_LAST { (0, n - recent) } else { (recent, n - recent) };
     let (y, index, value) = (y.as_ptr() as *const f32, index.as_ptr(), value.as_ptr());
     // SAFETY (of every read below): p < n, so index[p] and value[p] are in their slices, and
     // each index is a row of y (the caller's promise); a Vec3A is four aligned f32.
@@ -629,26 +647,35 @@ unsafe fn weighted_sum_avx2_fma(y: &[Vec3A], index: &[u32], value: &[f32]) -> Ve
         (rows, _mm256_permutevar8x32_ps(_mm256_castps128_ps256(values), spread))
     };
     let mut sums = [_mm256_setzero_ps(); 4];
-    let mut p = 0;
-    while p + 8 <= n {
+    let (mut p, end) = (first, first + summed);
+    while p + 8 <= end {
         for (q, sum) in sums.iter_mut().enumerate() {
             let (rows, values) = pair(p + 2 * q);
             *sum = _mm256_fmadd_ps(rows, values, *sum);
         }
         p += 8;
     }
-    while p + 2 <= n {
+    while p + 2 <= end {
         let (rows, values) = pair(p);
         sums[0] = _mm256_fmadd_ps(rows, values, sums[0]);
         p += 2;
     }
     let total = _mm256_add_ps(_mm256_add_ps(sums[0], sums[1]), _mm256_add_ps(sums[2], sums[3]));
     let mut sum = _mm_add_ps(_mm256_castps256_ps128(total), _mm256_extractf128_ps(total, 1));
-    if p < n {
-        sum = _mm_fmadd_ps(row(p), _mm_set1_ps(unsafe { *value.add(p) }), sum);
+    let single = |sum: __m128, p: usize| unsafe { _mm_fmadd_ps(row(p), _mm_set1_ps(*value.add(p)), sum) };
+    if p < end {
+        sum = single(sum, p);
+    }
+    // The nearest entries last: ascending after the others with `RECENT_LAST`, else descending.
+    for k in 0..recent {
+        sum = single(sum, if RECENT_LAST { end + k } else { recent - 1 - k });
     }
     Vec3A::from(sum)
 }
+
+/// Entries of each row (or column) that [`weighted_sum_avx2_fma`] adds after the others.
+#[cfg(target_arch = "x86_64")]
+const RECENT: usize = 2;
 
 /// A slice shared by the two halves of a dissection, which write disjoint rows.
 #[derive(Clone, Copy)]
@@ -687,8 +714,9 @@ mod tests {
     use super::*;
 
     /// The AVX2 kernel sums the same entries as the plain one (to rounding: it pairs and fuses
-    /// them differently), for every count of entries a row can have up to 40 (the paths of
-    /// eight, two and one entries), and the same bits every time.
+    /// them differently), with the nearest entries at either end, for every count of entries a
+    /// row can have up to 40 (the paths of eight, two and one entries, and of fewer entries than
+    /// it adds last), and the same bits every time.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn the_avx2_weighted_sum_matches_the_plain_one() {
@@ -704,15 +732,20 @@ mod tests {
             let value: Vec<f32> = (0..len).map(|p| 0.5 - (p as f32 * 0.73).sin()).collect();
             let plain = weighted_sum(&y, &index, &value);
             // SAFETY: the processor has AVX2 and FMA (checked above); every index is below 97.
-            let fast = unsafe { weighted_sum_avx2_fma(&y, &index, &value) };
+            let kernels = unsafe {
+                [weighted_sum_avx2_fma::<true>(&y, &index, &value), weighted_sum_avx2_fma::<false>(&y, &index, &value)]
+            };
             let scale: f32 = index.iter().zip(&value).map(|(&i, &v)| (y[i as usize] * v).abs().max_element()).sum();
-            let diff = (plain - fast).abs().max_element();
-            assert!(diff <= 1e-6 * scale.max(1.0), "{len} entries: {plain} against {fast}");
-            // SAFETY: as above.
-            assert_eq!(fast, unsafe { weighted_sum_avx2_fma(&y, &index, &value) });
-            if len == 1 {
-                assert_eq!(fast, y[index[0] as usize] * value[0], "one entry is one product");
+            for fast in kernels {
+                let diff = (plain - fast).abs().max_element();
+                assert!(diff <= 1e-6 * scale.max(1.0), "{len} entries: {plain} against {fast}");
+                if len == 1 {
+                    assert_eq!(fast, y[index[0] as usize] * value[0], "one entry is one product");
+                }
             }
+            // SAFETY: as above.
+            assert_eq!(kernels[0], unsafe { weighted_sum_avx2_fma::<true>(&y, &index, &value) });
+            assert_eq!(kernels[1], unsafe { weighted_sum_avx2_fma::<false>(&y, &index, &value) });
         }
     }
 
