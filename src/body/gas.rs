@@ -8,6 +8,8 @@
 
 use glam::{DVec3, Vec3, Vec3A};
 
+use super::coupling_slices::SLICE;
+use super::fan_rings::FanRings;
 use crate::parallel::WorkerPool;
 
 /// A boundary loop of a fragment, closed by a fan from the mean of its vertices.
@@ -46,6 +48,8 @@ pub(crate) struct Gas {
     /// the previous corner), so its gradient does not depend on the origin (see
     /// [`Gas::measure_with_gradient_parallel`]).
     closed_fan: Vec<bool>,
+    /// The closed fans as rings, for the gradient eight vertices at a time.
+    rings: FanRings,
     /// Per chunk of faces ([`FACE_CHUNK`]) and per fragment, that chunk's part of 6 V.
     chunk_six_v: Vec<f64>,
 }
@@ -350,6 +354,7 @@ impl Gas {
             corner_offsets: Vec::new(),
             corners: Vec::new(),
             closed_fan: Vec::new(),
+            rings: FanRings::default(),
             chunk_six_v: Vec::new(),
         }
     }
@@ -500,50 +505,70 @@ impl Gas {
     /// corner of each face, its f64 term and the irregular branch to it took about half of the
     /// pass's instructions).
     pub fn gradient_rows(&self, x: &[Vec3], origin: &[DVec3], first: usize, out: &mut [Vec3]) {
-        for (k, g) in out.iter_mut().enumerate() {
+        let mut k = 0;
+        while k < out.len() {
             let v = first + k;
-            let mut sum = Vec3::ZERO;
-            let fan = &self.corners[self.corner_offsets[v] as usize..self.corner_offsets[v + 1] as usize];
-            if self.closed_fan[v] {
-                // Around a closed ring `Σ (b - o)×(c - o) = Σ b×c` for any origin o, so the
-                // gradient is summed about the vertex itself in f32: short edges, no
-                // cancellation (about o, the f64 terms are ~|x - o|² for a sum the size of
-                // the fan's area). On the issue-5 balloon (one thread, perf) this pass went
-                // from 9.2% of an implicit step in f64 to 6.0%.
-                // The faces around a vertex are one fragment (fragments are the components joined
-                // through vertices).
-                if self.n_rt[(fan[0].fragment) as usize] <= 0.0 {
-                    *g = Vec3::ZERO;
-                    continue;
-                }
-                // In two running sums (even and odd corners): with one, each corner waited for
-                // the last one's addition, which set the pace of this pass.
-                let xv = point(x, v);
-                let across = |corner: &Corner| {
-                    let (b, c) = (point(x, corner.next as usize), point(x, corner.prev as usize));
-                    (b - xv).cross(c - xv)
-                };
-                let (mut even, mut odd) = (Vec3A::ZERO, Vec3A::ZERO);
-                let pairs = fan.chunks_exact(2);
-                let last = pairs.remainder().first().map_or(Vec3A::ZERO, across);
-                for pair in pairs {
-                    even += across(&pair[0]);
-                    odd += across(&pair[1]);
-                }
-                *g = Vec3::from(((even + last) + odd) * (1.0 / 6.0));
+            // Eight ring vertices of fragments with gas at a time (`fan_rings`).
+            if k + SLICE <= out.len() && self.rings.is_whole_slice(v) && (v..v + SLICE).all(|i| self.fan_has_gas(i)) {
+                self.rings.slice_gradient(x, v, &mut out[k..k + SLICE]);
+                k += SLICE;
                 continue;
             }
-            for corner in fan {
-                let frag = corner.fragment as usize;
-                if self.n_rt[frag] > 0.0 {
-                    let o = origin[frag];
-                    let (p1, p2) = (x[corner.next as usize].as_dvec3() - o, x[corner.prev as usize].as_dvec3() - o);
-                    // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
-                    sum += (p1.cross(p2) * SIXTH).as_vec3();
-                }
-            }
-            *g = sum;
+            out[k] = self.vertex_gradient(x, origin, v);
+            k += 1;
         }
+    }
+
+    /// Whether the faces around vertex v (one fragment when its fan is closed: fragments are the
+    /// components joined through vertices) hold gas.
+    #[inline]
+    fn fan_has_gas(&self, v: usize) -> bool {
+        let first = self.corner_offsets[v] as usize;
+        first < self.corner_offsets[v + 1] as usize && self.n_rt[self.corners[first].fragment as usize] > 0.0
+    }
+
+    /// `∂V/∂x_v` (without the caps' share) one vertex at a time.
+    fn vertex_gradient(&self, x: &[Vec3], origin: &[DVec3], v: usize) -> Vec3 {
+        let fan = &self.corners[self.corner_offsets[v] as usize..self.corner_offsets[v + 1] as usize];
+        if self.closed_fan[v] {
+            // Around a closed ring `Σ (b - o)×(c - o) = Σ b×c` for any origin o, so the gradient
+            // is summed about the vertex itself in f32: short edges, no cancellation (about o,
+            // the f64 terms are ~|x - o|² for a sum the size of the fan's area). On the issue-5
+            // balloon (one thread, perf) this pass went from 9.2% of an implicit step in f64 to
+            // 6.0%.
+            if !self.fan_has_gas(v) {
+                return Vec3::ZERO;
+            }
+            if self.rings.is_ring(v) {
+                return self.rings.gradient(x, v);
+            }
+            // Two rings meeting at v: its corners in face order, in two running sums (even and
+            // odd corners).
+            let xv = point(x, v);
+            let across = |corner: &Corner| {
+                let (b, c) = (point(x, corner.next as usize), point(x, corner.prev as usize));
+                (b - xv).cross(c - xv)
+            };
+            let (mut even, mut odd) = (Vec3A::ZERO, Vec3A::ZERO);
+            let pairs = fan.chunks_exact(2);
+            let last = pairs.remainder().first().map_or(Vec3A::ZERO, across);
+            for pair in pairs {
+                even += across(&pair[0]);
+                odd += across(&pair[1]);
+            }
+            return Vec3::from(((even + last) + odd) * (1.0 / 6.0));
+        }
+        let mut sum = Vec3::ZERO;
+        for corner in fan {
+            let frag = corner.fragment as usize;
+            if self.n_rt[frag] > 0.0 {
+                let o = origin[frag];
+                let (p1, p2) = (x[corner.next as usize].as_dvec3() - o, x[corner.prev as usize].as_dvec3() - o);
+                // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
+                sum += (p1.cross(p2) * SIXTH).as_vec3();
+            }
+        }
+        sum
     }
 
     /// The end of the parallel gathering: adds the face chunks' parts of 6 V (`chunk_six_v`,
@@ -584,6 +609,11 @@ impl Gas {
                 !fan.is_empty() && next == prev
             })
             .collect();
+        let (offsets, corners, closed) = (&self.corner_offsets, &self.corners, &self.closed_fan);
+        self.rings = FanRings::new(n, |v| {
+            let fan = &corners[offsets[v] as usize..offsets[v + 1] as usize];
+            closed[v].then(|| fan.iter().map(|c| (c.next, c.prev)).collect())
+        });
     }
 
     /// The origin of each fragment's volume sums: one of its vertices (accuracy only).
@@ -781,6 +811,7 @@ impl Gas {
             + (self.vertex_fragment.capacity() + self.reference_vertex.capacity() + self.corner_offsets.capacity()) * 4
             + self.closed_fan.capacity()
             + self.corners.capacity() * std::mem::size_of::<Corner>()
+            + self.rings.memory_bytes()
             + self.chunk_six_v.capacity() * 8
             + self.caps.capacity() * std::mem::size_of::<Cap>()
             + self.caps.iter().map(|c| c.ring.capacity() * 4).sum::<usize>()

@@ -21,6 +21,7 @@ mod coupling_slices;
 mod crack;
 mod energy;
 mod explicit;
+mod fan_rings;
 mod forces;
 mod gas;
 mod implicit;

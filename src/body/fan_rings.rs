@@ -1,0 +1,345 @@
+//! The gas gradient around closed fans, eight vertices at a time (SPEC 2.1: the pressure force
+//! `P ∂V/∂x`).
+//!
+//! Where the faces around a vertex v close one ring of neighbours `n_0 .. n_{L-1}` (in their
+//! winding), `∂V/∂x_v = Σ_t (n_t - v) × (n_{t+1} - v) / 6`, the indices modulo L: each corner
+//! `(v, n_t, n_{t+1})` of a face adds the cross product of its two other points, taken about v
+//! itself (short edges, no cancellation; about any origin the sum is the same, the ring being
+//! closed). In ring order each neighbour is loaded once, and the ring of a slice of eight
+//! consecutive vertices is laid out for 256-bit registers: group t of the slice holds the t-th
+//! ring entry of each of its eight vertices (lanes). After a lane's ring comes its first
+//! neighbour again (the corner that closes the ring), then the vertex itself, so the lanes with
+//! shorter rings add corners of zero while the longest one finishes.
+//!
+//! The corners alternate between two running sums (even and odd t): with one, each corner
+//! waited for the last one's addition. A vertex of a slice that cannot go eight at a time (a
+//! lane that is no ring, a fragment without gas, or a point at the end of the array, where a
+//! 16-byte load would read past it) takes the same sums one at a time, to the same bits.
+
+use glam::{Vec3, Vec3A};
+
+use super::coupling_slices::SLICE;
+
+/// The rings of a mesh's closed fans by slices of eight vertices (see the module doc).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct FanRings {
+    /// Per slice, where its groups start in `groups` (one more entry at the end).
+    offsets: Vec<u32>,
+    /// The ring entries, a group per position along the rings, a lane per vertex.
+    groups: Vec<[u32; SLICE]>,
+    /// Per vertex, the length of its ring (0: its fan is no single closed ring).
+    length: Vec<u32>,
+    /// Per slice, whether all eight lanes are rings and every entry is below the last point
+    /// (so each can be loaded 16 bytes at a time).
+    whole: Vec<bool>,
+}
+
+impl FanRings {
+    /// The rings of `n` vertices; `fan(v)` lists the (next, previous) corners of the faces
+    /// around v (in their winding) when v's fan is closed, else nothing. A fan that is closed
+    /// but is no single ring (two cones meeting at v) gets no ring.
+    pub fn new(n: usize, fan: impl Fn(usize) -> Option<Vec<(u32, u32)>>) -> Self {
+        let rings: Vec<Option<Vec<u32>>> = (0..n).map(|v| fan(v).and_then(|corners| walk(&corners))).collect();
+        let slices = n.div_ceil(SLICE);
+        let mut offsets = Vec::with_capacity(slices + 1);
+        let mut groups = Vec::new();
+        let mut whole = Vec::with_capacity(slices);
+        for s in 0..slices {
+            offsets.push(groups.len() as u32);
+            let lanes = s * SLICE..((s + 1) * SLICE).min(n);
+            let longest = lanes.clone().map(|v| rings[v].as_ref().map_or(0, Vec::len)).max().unwrap_or(0);
+            let first = groups.len();
+            // The closing entry after the longest ring.
+            groups.resize(first + longest + 1, [0; SLICE]);
+            for (lane, v) in lanes.clone().enumerate() {
+                let ring = rings[v].as_deref().unwrap_or(&[]);
+                for (t, group) in groups[first..].iter_mut().enumerate() {
+                    group[lane] = match t {
+                        t if t < ring.len() => ring[t],
+                        t if t == ring.len() && !ring.is_empty() => ring[0],
+                        _ => v as u32,
+                    };
+                }
+            }
+            let below_last = groups[first..].iter().flatten().all(|&i| (i as usize) + 1 < n);
+            whole.push(lanes.len() == SLICE && lanes.clone().all(|v| rings[v].is_some()) && below_last);
+        }
+        offsets.push(groups.len() as u32);
+        let length = rings.iter().map(|r| r.as_ref().map_or(0, |r| r.len() as u32)).collect();
+        Self { offsets, groups, length, whole }
+    }
+
+    /// Whether vertex v's fan is one closed ring.
+    pub fn is_ring(&self, v: usize) -> bool {
+        self.length.get(v).is_some_and(|&l| l > 0)
+    }
+
+    /// Whether the slice of vertex `first` (a multiple of eight) can go eight at a time.
+    pub fn is_whole_slice(&self, first: usize) -> bool {
+        first % SLICE == 0 && self.whole.get(first / SLICE).copied().unwrap_or(false)
+    }
+
+    /// `∂V/∂x_v` of a ring vertex, one corner at a time (the sums of [`FanRings::slice_gradient`]).
+    pub fn gradient(&self, x: &[Vec3], v: usize) -> Vec3 {
+        let (s, lane) = (v / SLICE, v % SLICE);
+        let groups = &self.groups[self.offsets[s] as usize..self.offsets[s + 1] as usize];
+        let length = self.length[v] as usize;
+        let xv = point(x, v);
+        let (mut even, mut odd) = (Vec3A::ZERO, Vec3A::ZERO);
+        let mut b = point(x, groups[0][lane] as usize) - xv;
+        for t in 0..length {
+            let c = point(x, groups[t + 1][lane] as usize) - xv;
+            if t % 2 == 0 {
+                even += b.cross(c);
+            } else {
+                odd += b.cross(c);
+            }
+            b = c;
+        }
+        Vec3::from((even + odd) * (1.0 / 6.0))
+    }
+
+    /// `∂V/∂x` of the eight vertices `first..first + 8` into `out` (a whole slice,
+    /// [`FanRings::is_whole_slice`]), with AVX2 where the processor has it.
+    pub fn slice_gradient(&self, x: &[Vec3], first: usize, out: &mut [Vec3]) {
+        assert!(self.is_whole_slice(first) && x.len() == self.length.len() && out.len() == SLICE);
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            let s = first / SLICE;
+            let groups = &self.groups[self.offsets[s] as usize..self.offsets[s + 1] as usize];
+            // SAFETY: AVX2 (checked above); the slice is whole, so its rows and entries are below
+            // the last point of x (whose length is the one the rings were made for).
+            unsafe { slice_gradient_avx2(x, groups, first, out) };
+            return;
+        }
+        for (k, g) in out.iter_mut().enumerate() {
+            *g = self.gradient(x, first + k);
+        }
+    }
+
+    pub fn memory_bytes(&self) -> usize {
+        self.offsets.capacity() * 4
+            + self.groups.capacity() * std::mem::size_of::<[u32; SLICE]>()
+            + self.length.capacity() * 4
+            + self.whole.capacity()
+    }
+}
+
+/// The ring of a closed fan from its (next, previous) corners: `n_0` the first corner's next,
+/// each following entry the previous corner of the face whose next is the entry before. None if
+/// the walk does not go through every corner once (no single ring).
+fn walk(corners: &[(u32, u32)]) -> Option<Vec<u32>> {
+    let &(start, mut current) = corners.first()?;
+    let mut ring = vec![start];
+    while current != start {
+        if ring.len() >= corners.len() {
+            return None;
+        }
+        ring.push(current);
+        current = corners.iter().find(|&&(next, _)| next == current)?.1;
+    }
+    (ring.len() == corners.len()).then_some(ring)
+}
+
+/// Point `i` of `x` as a `Vec3A` (16 bytes loaded at once where a point follows it).
+#[inline(always)]
+fn point(x: &[Vec3], i: usize) -> Vec3A {
+    #[cfg(target_arch = "x86_64")]
+    if i + 1 < x.len() {
+        // SAFETY: points i and i + 1 are in the slice (checked above), so the 16 bytes from the
+        // start of point i are too; SSE2 is always present on x86-64.
+        return Vec3A::from(unsafe { std::arch::x86_64::_mm_loadu_ps(x.as_ptr().add(i) as *const f32) });
+    }
+    Vec3A::from(x[i])
+}
+
+/// Three axes of eight lanes.
+#[cfg(target_arch = "x86_64")]
+type Lanes = (std::arch::x86_64::__m256, std::arch::x86_64::__m256, std::arch::x86_64::__m256);
+
+/// [`FanRings::slice_gradient`] with AVX2: each group's eight points loaded 16 bytes at a time
+/// and transposed, the cross products as `Vec3A::cross` spells them (two products, then their
+/// difference: the same bits). (Helpers are functions with the target feature, not closures: a
+/// closure does not inherit it, and its intrinsics become calls.)
+///
+/// # Safety
+/// The processor must have AVX2; rows `first..first + 8` and every entry of `groups` must be
+/// followed by another point in `x`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn slice_gradient_avx2(x: &[Vec3], groups: &[[u32; SLICE]], first: usize, out: &mut [Vec3]) {
+    use std::arch::x86_64::*;
+    // SAFETY: rows first..first + 8 are in x (the caller's contract).
+    let v = unsafe { super::coupling_slices::load_points_transposed(x, first) };
+    let zero = _mm256_setzero_ps();
+    let (mut even, mut odd) = ((zero, zero, zero), (zero, zero, zero));
+    // SAFETY (of every `around`): each entry is followed by another point (the contract).
+    let mut b = unsafe { around(x, &groups[0], v) };
+    for (t, group) in groups[1..].iter().enumerate() {
+        let c = unsafe { around(x, group, v) };
+        if t % 2 == 0 {
+            even = add(even, cross(b, c));
+        } else {
+            odd = add(odd, cross(b, c));
+        }
+        b = c;
+    }
+    let sixth = _mm256_set1_ps(1.0 / 6.0);
+    let sum = add(even, odd);
+    let (mut gx, mut gy, mut gz) = ([0f32; SLICE], [0f32; SLICE], [0f32; SLICE]);
+    // SAFETY: eight f32 into each local array.
+    unsafe {
+        _mm256_storeu_ps(gx.as_mut_ptr(), _mm256_mul_ps(sum.0, sixth));
+        _mm256_storeu_ps(gy.as_mut_ptr(), _mm256_mul_ps(sum.1, sixth));
+        _mm256_storeu_ps(gz.as_mut_ptr(), _mm256_mul_ps(sum.2, sixth));
+    }
+    for (lane, g) in out.iter_mut().enumerate() {
+        *g = Vec3::new(gx[lane], gy[lane], gz[lane]);
+    }
+}
+
+/// The eight points of `group` minus the lanes' vertices `v`, by axis.
+///
+/// # Safety
+/// The processor must have AVX2; every entry of `group` must be followed by another point.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn around(x: &[Vec3], group: &[u32; SLICE], v: Lanes) -> Lanes {
+    use std::arch::x86_64::*;
+    let base = x.as_ptr() as *const f32;
+    // SAFETY: point i is followed by point i + 1 (the contract), so the 16 bytes from its start
+    // are inside the slice.
+    let (r04, r15, r26, r37) = unsafe {
+        let row = |lane: usize| base.add(3 * group[lane] as usize);
+        (
+            _mm256_set_m128(_mm_loadu_ps(row(4)), _mm_loadu_ps(row(0))),
+            _mm256_set_m128(_mm_loadu_ps(row(5)), _mm_loadu_ps(row(1))),
+            _mm256_set_m128(_mm_loadu_ps(row(6)), _mm_loadu_ps(row(2))),
+            _mm256_set_m128(_mm_loadu_ps(row(7)), _mm_loadu_ps(row(3))),
+        )
+    };
+    let (px, py, pz, _) = super::coupling_slices::transpose_rows(r04, r15, r26, r37);
+    (_mm256_sub_ps(px, v.0), _mm256_sub_ps(py, v.1), _mm256_sub_ps(pz, v.2))
+}
+
+/// `b × c` lane by lane: x = b.y c.z - b.z c.y, and cyclic.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn cross(b: Lanes, c: Lanes) -> Lanes {
+    use std::arch::x86_64::*;
+    (
+        _mm256_sub_ps(_mm256_mul_ps(b.1, c.2), _mm256_mul_ps(b.2, c.1)),
+        _mm256_sub_ps(_mm256_mul_ps(b.2, c.0), _mm256_mul_ps(b.0, c.2)),
+        _mm256_sub_ps(_mm256_mul_ps(b.0, c.1), _mm256_mul_ps(b.1, c.0)),
+    )
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn add(sum: Lanes, term: Lanes) -> Lanes {
+    use std::arch::x86_64::*;
+    (_mm256_add_ps(sum.0, term.0), _mm256_add_ps(sum.1, term.1), _mm256_add_ps(sum.2, term.2))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A latitude-longitude sphere (two poles of valence `around`, the rest of valence 6), its
+    /// points moved at random, with its faces' (next, previous) corners per vertex.
+    fn sphere(rings: usize, around: usize) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let mut unit = crate::body::test_randoms(0xfa2_7129);
+        let mut x = vec![Vec3::new(0.0, 0.0, 1.0)];
+        for r in 1..rings {
+            let theta = std::f32::consts::PI * r as f32 / rings as f32;
+            for a in 0..around {
+                let phi = std::f32::consts::TAU * a as f32 / around as f32;
+                x.push(Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()));
+            }
+        }
+        x.push(Vec3::new(0.0, 0.0, -1.0));
+        let last = x.len() as u32 - 1;
+        let at = |r: usize, a: usize| (1 + (r - 1) * around + a % around) as u32;
+        let mut t = Vec::new();
+        for a in 0..around {
+            t.push([0, at(1, a), at(1, a + 1)]);
+            t.push([last, at(rings - 1, a + 1), at(rings - 1, a)]);
+            for r in 1..rings - 1 {
+                t.push([at(r, a), at(r + 1, a), at(r + 1, a + 1)]);
+                t.push([at(r, a), at(r + 1, a + 1), at(r, a + 1)]);
+            }
+        }
+        for p in &mut x {
+            *p = *p * 2.0 + Vec3::new(unit(), unit(), unit()) * 0.05 + Vec3::splat(10.0);
+        }
+        (x, t)
+    }
+
+    /// (next, previous) of the faces around each vertex (in face order), and whether they close.
+    fn fans(n: usize, t: &[[u32; 3]]) -> Vec<(Vec<(u32, u32)>, bool)> {
+        (0..n as u32)
+            .map(|v| {
+                let corners: Vec<(u32, u32)> = t
+                    .iter()
+                    .filter_map(|f| {
+                        let c = f.iter().position(|&i| i == v)?;
+                        Some((f[(c + 1) % 3], f[(c + 2) % 3]))
+                    })
+                    .collect();
+                let (mut next, mut prev): (Vec<u32>, Vec<u32>) = corners.iter().copied().unzip();
+                next.sort_unstable();
+                prev.sort_unstable();
+                let closed = !corners.is_empty() && next == prev;
+                (corners, closed)
+            })
+            .collect()
+    }
+
+    /// Eight at a time is one at a time to the bit, and both are the sum over the faces' corners
+    /// (in f64) to rounding; a vertex at an open boundary or past the end gets no ring, and its
+    /// slice goes one at a time.
+    #[test]
+    fn ring_gradients_are_the_corner_sums() {
+        let (x, mut t) = sphere(7, 9);
+        let n = x.len();
+        // A hole: the corners of the removed face are no longer closed fans.
+        let removed = t.remove(20);
+        let fan = fans(n, &t);
+        let rings = FanRings::new(n, |v| fan[v].1.then(|| fan[v].0.clone()));
+        for &v in &removed {
+            assert!(!rings.is_ring(v as usize), "vertex {v}");
+        }
+        assert!((0..n).filter(|&v| rings.is_ring(v)).count() == n - 3);
+        let whole: Vec<usize> = (0..n).step_by(SLICE).filter(|&f| rings.is_whole_slice(f)).collect();
+        assert!(whole.len() >= 3 && whole.len() < n / SLICE, "{whole:?}");
+        for &first in &whole {
+            let mut fast = [Vec3::NAN; SLICE];
+            rings.slice_gradient(&x, first, &mut fast);
+            for (lane, g) in fast.iter().enumerate() {
+                assert_eq!(*g, rings.gradient(&x, first + lane), "vertex {}", first + lane);
+            }
+        }
+        for v in (0..n).filter(|&v| rings.is_ring(v)) {
+            let p = |i: u32| x[i as usize].as_dvec3();
+            let exact: glam::DVec3 =
+                fan[v].0.iter().map(|&(b, c)| (p(b) - p(v as u32)).cross(p(c) - p(v as u32)) / 6.0).sum();
+            let got = rings.gradient(&x, v).as_dvec3();
+            assert!(exact.length() > 0.1 && (got - exact).length() <= 1e-5 * exact.length(), "{v}: {got} vs {exact}");
+        }
+    }
+
+    /// Two cones meeting at a vertex close its fan but make no single ring.
+    #[test]
+    fn two_rings_at_a_vertex_are_no_ring() {
+        let one = [(1, 2), (2, 3), (3, 1)];
+        assert_eq!(walk(&one), Some(vec![1, 2, 3]));
+        let two = [(1, 2), (2, 3), (3, 1), (4, 5), (5, 6), (6, 4)];
+        assert_eq!(walk(&two), None);
+        assert_eq!(walk(&[(1, 2), (2, 4)]), None);
+        let rings = FanRings::new(1, |_| Some(two.to_vec()));
+        assert!(!rings.is_ring(0) && !rings.is_whole_slice(0));
+    }
+}
