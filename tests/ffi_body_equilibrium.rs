@@ -10,20 +10,6 @@ mod body_util;
 use body_util::*;
 use softshell::ffi::body::*;
 
-fn sum_rest_squared(p: &[f32], t: &[u32]) -> f64 {
-    let mut seen = std::collections::HashSet::new();
-    let mut sum = 0.0;
-    for tri in t.chunks_exact(3) {
-        for k in 0..3 {
-            let (a, b) = (tri[k], tri[(k + 1) % 3]);
-            if seen.insert((a.min(b), a.max(b))) {
-                sum += (0..3).map(|c| ((p[3 * a as usize + c] - p[3 * b as usize + c]) as f64).powi(2)).sum::<f64>();
-            }
-        }
-    }
-    sum
-}
-
 #[test]
 fn settled_volume_matches_the_analytic_equilibrium() {
     let (p, t) = icosphere(3, 1.0);

@@ -328,26 +328,25 @@ fn row_sums_scalar(
     rows: Range<usize>,
     mut f: impl FnMut(usize, Vec3A),
 ) {
-    let mut row = rows.start;
-    while row < rows.end {
-        let slice = row / SLICE;
-        let lanes = (rows.end - row).min(SLICE);
-        let mut acc = [Vec3A::ZERO; SLICE];
-        for group in &groups[offsets[slice] as usize..offsets[slice + 1] as usize] {
-            for (lane, acc) in acc.iter_mut().enumerate().take(lanes) {
-                assert!((group.other[lane] as usize) < input.len(), "a coupling's other end is not a row");
-                let d = input[row + lane] - input[group.other[lane] as usize];
-                let w =
-                    Vec3A::new(from_bf16(group.w[0][lane]), from_bf16(group.w[1][lane]), from_bf16(group.w[2][lane]));
-                let s = w.x * d.x + w.y * d.y + w.z * d.z;
-                *acc += from_bf16(group.alpha[lane]) * d + w * s;
-            }
-        }
-        for (lane, acc) in acc.iter().enumerate().take(lanes) {
-            f(row + lane, *acc);
-        }
-        row += SLICE;
+    for row in rows {
+        f(row, row_coupling_sum(offsets, groups, input, row));
     }
+}
+
+/// `Σ_c B_c (x_row - input[other_c])` over the couplings of row `row` alone, in the order of
+/// its groups (the sums of the eight-row product, one lane). Panics if an other end is not a
+/// row of `input`.
+pub(crate) fn row_coupling_sum(offsets: &[u32], groups: &[CouplingGroup], input: &[Vec3A], row: usize) -> Vec3A {
+    let (slice, lane) = (row / SLICE, row % SLICE);
+    let mut acc = Vec3A::ZERO;
+    for group in &groups[offsets[slice] as usize..offsets[slice + 1] as usize] {
+        assert!((group.other[lane] as usize) < input.len(), "a coupling's other end is not a row");
+        let d = input[row] - input[group.other[lane] as usize];
+        let w = Vec3A::new(from_bf16(group.w[0][lane]), from_bf16(group.w[1][lane]), from_bf16(group.w[2][lane]));
+        let s = w.x * d.x + w.y * d.y + w.z * d.z;
+        acc += from_bf16(group.alpha[lane]) * d + w * s;
+    }
+    acc
 }
 
 /// Eight `Vec3A` rows of `input` (`rows[lane]`), as their x, y and z lanes.
@@ -811,6 +810,12 @@ mod tests {
             }
         }
         let input: Vec<Vec3A> = (0..n).map(|_| Vec3A::new(unit(), unit(), unit()) * 10.0).collect();
+        // One row's couplings alone (the contacts' reactions) are the matrix's.
+        for (i, row) in rows.iter().enumerate() {
+            let want: Vec3A = row.iter().map(|&(c, j)| c.rounded().apply(input[i] - input[j as usize])).sum();
+            let got = row_coupling_sum(&slices.offsets, &slices.groups, &input, i);
+            assert!((got - want).length() <= 1e-5 * (1.0 + row.len() as f32 * 40.0), "row {i}: {got} vs {want}");
+        }
         let mass: Vec<f32> = (0..n).map(|_| 0.5 + unit().abs()).collect();
         let inv_mass: Vec<f32> = (0..n).map(|i| if i % 13 == 5 { 0.0 } else { 1.0 / mass[i] }).collect();
         // Rows 0-39 in fragment 0, 40-51 without gas, then alternating (mixed slices).

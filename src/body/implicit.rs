@@ -29,7 +29,7 @@ use super::coarse::{CoarseSpace, CoarseView};
 #[cfg(target_arch = "x86_64")]
 use super::coupling_slices::load_points_transposed;
 use super::coupling_slices::{
-    CouplingGroup, CouplingSlices, RowTerms, SLICE, SliceRowsMut, group_range, product_slices,
+    CouplingGroup, CouplingSlices, RowTerms, SLICE, SliceRowsMut, group_range, product_slices, row_coupling_sum,
 };
 use super::energy::{self, springs_energy_strain};
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
@@ -126,6 +126,10 @@ pub(crate) struct ImplicitScratch {
     contact_slot: Vec<u32>,
     contact_normal: Vec<Vec3A>,
     contact_pushed: Vec<f32>,
+    /// Per vertex (with obstacles only): the last substep held it on an obstacle and the
+    /// obstacle pushed it (`contact_reaction` >= 0), so this one holds it again while it touches
+    /// and does not move away, whatever its own forces say (see `start_vertex`).
+    contact_held: Vec<bool>,
     /// The coarse level of the preconditioner (made on the first substep) and the substep
     /// length it was made (or tried) for.
     coarse: Option<CoarseSpace>,
@@ -238,6 +242,7 @@ impl ImplicitScratch {
             + self.contact_pushed.capacity() * 4
             + self.contact_slot.capacity() * 4
             + self.contact_normal.capacity() * 16
+            + self.contact_held.capacity()
             + self.couplings.memory_bytes()
             + self.spring_terms.capacity() * std::mem::size_of::<SpringTerms>()
             + (self.gas_coef.capacity() + self.gas_dot.capacity() + self.gas_partial.capacity()) * 8
@@ -297,6 +302,26 @@ impl System<'_> {
     }
 }
 
+/// The normal reaction `λ = n·(A Δv - rhs)_i` an obstacle gave row i in the solve (positive
+/// when it pushed: the constraint's force along its normal, Baraff and Witkin's multiplier):
+/// the row's mass and couplings ([`row_coupling_sum`], the product's sums) and its gas term
+/// `g_i (h² P/V Σ g·Δv)` (`gas`: `g_i` and the fragment's [`gas_scale`]).
+fn contact_reaction(
+    mass: f32,
+    (offsets, groups): (&[u32], &[CouplingGroup]),
+    dv: &[Vec3A],
+    i: usize,
+    rhs: Vec3A,
+    gas: Option<(Vec3A, f32)>,
+    normal: Vec3A,
+) -> f32 {
+    let mut row = dv[i] * mass + row_coupling_sum(offsets, groups, dv, i);
+    if let Some((g, scale)) = gas {
+        row += g * scale;
+    }
+    normal.dot(row - rhs)
+}
+
 /// A chunk of vertices for the assembly pass, with the matching parts of the output arrays.
 struct AssemblyTask<'a> {
     first: usize,
@@ -311,6 +336,9 @@ struct AssemblyTask<'a> {
     contact_slot: &'a mut [u32],
     contact_normal: &'a mut [Vec3A],
     contact_pushed: &'a mut [f32],
+    /// Per row whether the last substep held it on an obstacle that pushed (empty without
+    /// obstacles).
+    contact_held: &'a [bool],
     /// Over the chunk: `Σ g·Δv` per gas fragment (the start of the solve).
     gas: &'a mut [f64],
 }
@@ -392,7 +420,8 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
             f
         });
         let (rhs, mut inv_diag, magnitude) = assemble_vertex(sys, springs, i, f, gas_dot_v);
-        let (dv, filter) = start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, t.dv[k], &mut inv_diag);
+        let held = t.contact_held.get(k).copied().unwrap_or(false);
+        let (dv, filter) = start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, t.dv[k], held, &mut inv_diag);
         t.rhs[k] = rhs;
         t.inv_diag[k] = inv_diag;
         t.dv[k] = dv;
@@ -422,7 +451,10 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
 /// obstacle, its contact filter, with `inv_diag` restricted to the contact's tangent plane.
 ///
 /// Contacts inside the solve (Baraff and Witkin 1998, modified PCG): a vertex resting on an
-/// obstacle, moving and pushed into it, gets the constraint (v + Δv)·n = 0. Coulomb friction
+/// obstacle, moving and pushed into it, gets the constraint (v + Δv)·n = 0; so does one the
+/// obstacle held and pushed in the last substep (`held`), even if its own forces now pull it
+/// away: its neighbours may still press it down, which only the reaction after a solve tells.
+/// Coulomb friction
 /// (SPEC 2.3) follows the solve, bounded by the normal speed the contact took away; restitution
 /// with the other integrators' contact response.
 #[allow(clippy::too_many_arguments)]
@@ -435,6 +467,7 @@ fn start_vertex(
     v: Vec3,
     rhs: Vec3A,
     guess: Vec3A,
+    held: bool,
     inv_diag: &mut SymmetricBlock,
 ) -> (Vec3A, ContactFilter) {
     if model.inv_mass[i] == 0.0 {
@@ -443,8 +476,9 @@ fn start_vertex(
     let Some(normal) = (!obstacles.is_empty()).then(|| touching(x, obstacles, 1e-6)).flatten() else {
         return (guess, ContactFilter::Free);
     };
-    // Released when moving away or pulled away (the contact cannot pull).
-    if v.dot(normal) > 0.0 || Vec3::from(rhs).dot(normal) > 0.0 {
+    // Released when moving away, or pulled away by its own forces unless it was held (the
+    // contact cannot pull).
+    if v.dot(normal) > 0.0 || (!held && Vec3::from(rhs).dot(normal) > 0.0) {
         return (guess, ContactFilter::Free);
     }
     // The normal speed the contact takes away (per unit mass the normal impulse), to first
@@ -841,6 +875,7 @@ struct Shared<'a> {
     contact_slot: SharedSlice<'a, u32>,
     contact_normal: SharedSlice<'a, Vec3A>,
     contact_pushed: SharedSlice<'a, f32>,
+    contact_held: SharedSlice<'a, bool>,
     terms: SharedSlice<'a, SpringTerms>,
     dv: SharedSlice<'a, Vec3A>,
     r: SharedSlice<'a, Vec3A>,
@@ -1074,7 +1109,8 @@ impl Shared<'_> {
 
     /// Preconditioned conjugate gradients (modified PCG: every vector filtered by the contacts)
     /// from the start in `dv`, whose `Σ g·Δv` per fragment and chunk is in `gas`; returns the
-    /// iterations. Run by every member of the team.
+    /// iterations and `Σ g·Δv` per fragment of the solution (kept up as Δv moves, `Σ g·p` being
+    /// known at each step: for the contacts' reactions). Run by every member of the team.
     ///
     /// Each member claims chunks of rows, its own block first ([`Team::claim`]), the passes over
     /// them are separated by barriers, and every reduction adds the chunks' partial sums in chunk
@@ -1088,7 +1124,7 @@ impl Shared<'_> {
     /// and join per pass (four per iteration) to 2.03-2.07 ms (1.25-1.32); claiming instead of
     /// fixed blocks alone: 2.18-2.34 ms to 2.03-2.07 ms (the two cores of the test machine do not
     /// run equally fast).
-    fn solve(&self, team: &Team, input: &SolveInput) -> usize {
+    fn solve(&self, team: &Team, input: &SolveInput) -> (usize, Vec<f64>) {
         let SolveInput { sys, contact, coupling, rhs, inv_diag, any_contact, fragments, tolerance, max_iterations } =
             *input;
         let Shared { dv, r, z, p, ap, gas, chunk_pap, chunk_rr, chunk_rz, .. } = self;
@@ -1099,6 +1135,7 @@ impl Shared<'_> {
             let mut gas_dot = vec![0.0f64; fragments];
             // SAFETY: nobody writes the gas sums (made by the assembly) in this pass.
             sum_gas_partial(unsafe { gas.whole() }, &mut gas_dot);
+            let mut gas_dot_dv = gas_dot.clone();
             let scale = gas_scale(sys, &gas_dot);
             // r = rhs - A Δv, z = M⁻¹ r: a member's rows of r need only its own rows of A Δv, so
             // no barrier between the two.
@@ -1134,6 +1171,9 @@ impl Shared<'_> {
                     break;
                 }
                 let alpha = (rz / pap) as f32;
+                for (sum, &dot) in gas_dot_dv.iter_mut().zip(&gas_dot) {
+                    *sum += alpha as f64 * dot;
+                }
                 // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass.
                 team.claim(chunks, |c| {
                     // SAFETY: this member's chunks of Δv, r, z, ap and of the sums; p is written by
@@ -1173,7 +1213,7 @@ impl Shared<'_> {
                 // p = z + β p, with Σ g·p per gas fragment in the same pass.
                 self.direction(team, input, beta, &mut gas_dot);
             }
-            iterations
+            (iterations, gas_dot_dv)
         }
     }
 }
@@ -1315,6 +1355,8 @@ pub(crate) fn substep(
         s.contact_slot.resize(n, u32::MAX);
         s.contact_normal.resize(n, Vec3A::ZERO);
         s.contact_pushed.resize(n, 0.0);
+        // A vertex appended by a split starts free (the reaction is measured per vertex).
+        s.contact_held.resize(n, false);
     }
     let fragments = s.gas_dot.len();
     let chunks = n.div_ceil(CHUNK);
@@ -1359,6 +1401,7 @@ pub(crate) fn substep(
         contact_slot: SharedSlice::new(&mut s.contact_slot),
         contact_normal: SharedSlice::new(&mut s.contact_normal),
         contact_pushed: SharedSlice::new(&mut s.contact_pushed),
+        contact_held: SharedSlice::new(&mut s.contact_held),
         terms: SharedSlice::new(&mut s.spring_terms),
         dv: SharedSlice::new(&mut s.dv),
         r: SharedSlice::new(&mut s.r),
@@ -1505,7 +1548,7 @@ pub(crate) fn substep(
         if !reuse {
             state_pass(team, gradient_in_team.then_some(&gas_origin[..]), false);
         }
-        let (iterations, any_contact) = {
+        let (iterations, any_contact, end_gas_scale) = {
             let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
             let gas = gas_guard.as_deref();
             // SAFETY: nobody writes x and v until the last pass below, after a barrier and after
@@ -1551,7 +1594,8 @@ pub(crate) fn substep(
                         dv: shared.dv.part(rows.clone()),
                         contact_slot: if has_contact { shared.contact_slot.part(rows.clone()) } else { &mut [] },
                         contact_normal: if has_contact { shared.contact_normal.part(rows.clone()) } else { &mut [] },
-                        contact_pushed: if has_contact { shared.contact_pushed.part(rows) } else { &mut [] },
+                        contact_pushed: if has_contact { shared.contact_pushed.part(rows.clone()) } else { &mut [] },
+                        contact_held: if has_contact { &shared.contact_held.whole()[rows] } else { &[] },
                         gas: shared.gas.part(gas_rows(c)),
                     }
                 };
@@ -1574,7 +1618,10 @@ pub(crate) fn substep(
             let rhs_norm = rhs_squared.sqrt();
             let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
             if r0 <= 0.0 {
-                (0, any_contact)
+                let mut gas_dot_dv = vec![0.0f64; fragments];
+                // SAFETY: nobody writes the gas sums (made by the assembly) in this pass.
+                sum_gas_partial(unsafe { shared.gas.whole() }, &mut gas_dot_dv);
+                (0, any_contact, gas_scale(&sys, &gas_dot_dv))
             } else {
                 // SAFETY: as above.
                 let input = unsafe {
@@ -1594,7 +1641,8 @@ pub(crate) fn substep(
                         max_iterations,
                     }
                 };
-                (shared.solve(team, &input), any_contact)
+                let (iterations, gas_dot_dv) = shared.solve(team, &input);
+                (iterations, any_contact, gas_scale(&sys, &gas_dot_dv))
             }
         };
         // SAFETY: from here on each member reads and writes only the rows of its own chunks (the
@@ -1635,21 +1683,44 @@ pub(crate) fn substep(
                 }
             }
         }
-        // v += Δv, friction, x += h v, then the contact response (SPEC 2.3) of each vertex.
+        // v += Δv, friction, x += h v, then the contact response (SPEC 2.3) of each vertex; with
+        // contacts, each one's reaction in the solve (whether the next substep holds it).
         let (restitution, friction) = (model.settings.restitution, model.settings.friction);
+        let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+        let vertex_fragment = gas_guard.as_deref().map_or(&[][..], |g| &g.vertex_fragment[..]);
+        // SAFETY: with contacts there is no momentum correction, so nobody writes Δv in this
+        // pass; nobody writes the right side, the couplings and the gradient from here on.
+        let reactions = any_contact.then(|| unsafe {
+            let coupling = (shared.coupling_offsets, shared.couplings.whole());
+            (shared.dv.whole(), shared.rhs.whole(), coupling, gradient.whole())
+        });
         team.claim(chunks, |c| {
             let rows = rows(c);
             let first = rows.start;
             // SAFETY: this member's chunks.
-            let (x, v, dv, finite) = unsafe {
-                (xs.part(rows.clone()), vs.part(rows.clone()), shared.dv.part(rows), chunk_finite.part(c..c + 1))
+            let (x, v, finite) = unsafe { (xs.part(rows.clone()), vs.part(rows.clone()), chunk_finite.part(c..c + 1)) };
+            // SAFETY: this member's chunk (the reactions of its rows; allocated with obstacles).
+            let held =
+                if obstacles.is_empty() { &mut [][..] } else { unsafe { shared.contact_held.part(rows.clone()) } };
+            held.fill(false);
+            // Δv, kept as the next substep's warm start (corrected here without contacts, in this
+            // member's rows).
+            let dv: &[Vec3A] = match reactions {
+                Some((dv, ..)) => &dv[rows],
+                None => {
+                    // SAFETY: this member's chunk; without contacts nobody reads other rows of Δv
+                    // in this pass.
+                    let dv = unsafe { shared.dv.part(rows) };
+                    for d in dv.iter_mut() {
+                        *d += correction;
+                    }
+                    dv
+                }
             };
             let mut all_finite = true;
             for k in 0..x.len() {
                 let i = first + k;
-                // Kept as the next substep's warm start.
-                let dvi = dv[k] + correction;
-                dv[k] = dvi;
+                let dvi = dv[k];
                 if model.inv_mass[i] == 0.0 {
                     all_finite &= x[k].is_finite() && v[k].is_finite();
                     continue;
@@ -1658,6 +1729,14 @@ pub(crate) fn substep(
                 *v += Vec3::from(dvi);
                 if let Some(slot) = contact.slot.get(i).filter(|&&slot| slot != u32::MAX) {
                     let (normal, pushed) = (Vec3::from(contact.normal[*slot as usize]), pushed[*slot as usize]);
+                    if let Some((dv_all, rhs, coupling, gradient)) = reactions {
+                        let gas = vertex_fragment
+                            .get(i)
+                            .filter(|&&f| f != u32::MAX)
+                            .map(|&f| (Vec3A::from(gradient[i]), end_gas_scale[f as usize]));
+                        let reaction = contact_reaction(model.mass[i], coupling, dv_all, i, rhs[i], gas, normal.into());
+                        held[k] = reaction >= 0.0;
+                    }
                     // SPEC 2.3 Coulomb friction on a sliding contact: the tangential speed drops
                     // by at most `friction` times the normal speed change, never past zero.
                     let tangential = *v - normal * v.dot(normal);
@@ -1674,6 +1753,7 @@ pub(crate) fn substep(
             }
             finite[0] = all_finite;
         });
+        drop(gas_guard);
         if prepare {
             team.barrier();
             if gradient_in_team {
