@@ -1595,6 +1595,7 @@ pub(crate) fn substep(
                         contact_slot: if has_contact { shared.contact_slot.part(rows.clone()) } else { &mut [] },
                         contact_normal: if has_contact { shared.contact_normal.part(rows.clone()) } else { &mut [] },
                         contact_pushed: if has_contact { shared.contact_pushed.part(rows.clone()) } else { &mut [] },
+                        // (Read only: written by the last pass of the substep.)
                         contact_held: if has_contact { &shared.contact_held.whole()[rows] } else { &[] },
                         gas: shared.gas.part(gas_rows(c)),
                     }
@@ -1689,7 +1690,8 @@ pub(crate) fn substep(
         let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
         let vertex_fragment = gas_guard.as_deref().map_or(&[][..], |g| &g.vertex_fragment[..]);
         // SAFETY: with contacts there is no momentum correction, so nobody writes Δv in this
-        // pass; nobody writes the right side, the couplings and the gradient from here on.
+        // pass; nobody writes the right side, the couplings and the gradient in it (the state
+        // pass after the next barrier measures the gradient again; these are not used there).
         let reactions = any_contact.then(|| unsafe {
             let coupling = (shared.coupling_offsets, shared.couplings.whole());
             (shared.dv.whole(), shared.rhs.whole(), coupling, gradient.whole())
