@@ -23,25 +23,6 @@ use softshell::ffi::{SoftshellBody, SoftshellStatus};
 #[path = "../tests/body_util/mod.rs"]
 mod body_util;
 
-/// Σ L0² over the edges of a mesh.
-fn sum_rest_squared(positions: &[f32], triangles: &[u32]) -> f64 {
-    let mut seen = std::collections::HashSet::new();
-    let mut sum = 0.0;
-    for t in triangles.chunks_exact(3) {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            if seen.insert((a.min(b), a.max(b))) {
-                let d: f64 = (0..3)
-                    .map(|c| (positions[3 * a as usize + c] - positions[3 * b as usize + c]) as f64)
-                    .map(|x| x * x)
-                    .sum();
-                sum += d;
-            }
-        }
-    }
-    sum
-}
-
 struct Run {
     ms_per_step: f64,
     /// The 10th percentile and the median of the step times, ms (steadier than the mean on a
@@ -182,7 +163,7 @@ fn main() {
     let steps = if quick { 200 } else { 600 };
     let (mut positions, triangles) = body_util::icosphere(5, 1.0);
     let vertices = positions.len() / 3;
-    let sum_l2 = sum_rest_squared(&positions, &triangles);
+    let sum_l2 = body_util::sum_rest_squared(&positions, &triangles);
     let n_rt = 2500.0f64;
     let s = 1.05f64.cbrt();
     let ks = 3.0 * n_rt / (s * (s - 1.0) * sum_l2);

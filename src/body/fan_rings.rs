@@ -19,6 +19,7 @@
 use glam::{Vec3, Vec3A};
 
 use super::coupling_slices::SLICE;
+use super::gas::point;
 
 /// The rings of a mesh's closed fans by slices of eight vertices (see the module doc).
 #[derive(Clone, Debug, Default)]
@@ -139,18 +140,6 @@ fn walk(corners: &[(u32, u32)]) -> Option<Vec<u32>> {
         current = corners.iter().find(|&&(next, _)| next == current)?.1;
     }
     (ring.len() == corners.len()).then_some(ring)
-}
-
-/// Point `i` of `x` as a `Vec3A` (16 bytes loaded at once where a point follows it).
-#[inline(always)]
-fn point(x: &[Vec3], i: usize) -> Vec3A {
-    #[cfg(target_arch = "x86_64")]
-    if i + 1 < x.len() {
-        // SAFETY: points i and i + 1 are in the slice (checked above), so the 16 bytes from the
-        // start of point i are too; SSE2 is always present on x86-64.
-        return Vec3A::from(unsafe { std::arch::x86_64::_mm_loadu_ps(x.as_ptr().add(i) as *const f32) });
-    }
-    Vec3A::from(x[i])
 }
 
 /// Three axes of eight lanes.

@@ -301,7 +301,7 @@ unsafe fn add_face_tets_avx2(
 /// assembled from its three floats. (`Vec3A::from(Vec3)` assembles the lanes one by one: with
 /// two points per triangle corner that was a fifth of the gradient pass's instructions.)
 #[inline(always)]
-fn point(x: &[Vec3], i: usize) -> Vec3A {
+pub(super) fn point(x: &[Vec3], i: usize) -> Vec3A {
     #[cfg(target_arch = "x86_64")]
     if i + 1 < x.len() {
         // SAFETY: points i and i + 1 are in the slice (checked above), so the 16 bytes from
