@@ -503,7 +503,9 @@ impl Gas {
     /// `∂V/∂x` (without the caps' share) at the vertices `first..first + out.len()` into `out`
     /// (the volume is summed over faces apart, [`Gas::face_chunk_volumes`]: here, at the first
     /// corner of each face, its f64 term and the irregular branch to it took about half of the
-    /// pass's instructions).
+    /// pass's instructions). Slices of eight vertices whose fans are closed rings with gas go
+    /// eight at a time (`fan_rings`: on the issue-5 balloon the pass went from 420M to 165M
+    /// instructions over 200 steps, callgrind, one thread).
     pub fn gradient_rows(&self, x: &[Vec3], origin: &[DVec3], first: usize, out: &mut [Vec3]) {
         let mut k = 0;
         while k < out.len() {
