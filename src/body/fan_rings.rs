@@ -108,8 +108,9 @@ impl FanRings {
         if std::arch::is_x86_feature_detected!("avx2") {
             let s = first / SLICE;
             let groups = &self.groups[self.offsets[s] as usize..self.offsets[s + 1] as usize];
-            // SAFETY: AVX2 (checked above); the slice is whole, so its rows and entries are below
-            // the last point of x (whose length is the one the rings were made for).
+            // SAFETY: AVX2 (checked above); the slice is whole, so its entries are below the
+            // last point of x (whose length is the one the rings were made for), and its rows are
+            // in x.
             unsafe { slice_gradient_avx2(x, groups, first, out) };
             return;
         }
@@ -152,8 +153,8 @@ type Lanes = (std::arch::x86_64::__m256, std::arch::x86_64::__m256, std::arch::x
 /// closure does not inherit it, and its intrinsics become calls.)
 ///
 /// # Safety
-/// The processor must have AVX2; rows `first..first + 8` and every entry of `groups` must be
-/// followed by another point in `x`.
+/// The processor must have AVX2; rows `first..first + 8` must be in `x` and every entry of
+/// `groups` followed by another point in it.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn slice_gradient_avx2(x: &[Vec3], groups: &[[u32; SLICE]], first: usize, out: &mut [Vec3]) {
