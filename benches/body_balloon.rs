@@ -94,6 +94,7 @@ fn run(positions: &[f32], triangles: &[u32], def: &SoftshellBodyDef, steps: usiz
         times.push(elapsed);
         iterations += stats.solver_iterations;
         if std::env::var("TRACE").is_ok() && k % 10 == 0 {
+            eprint!("{}", shape_trace(body));
             eprintln!(
                 "step {k}: {} it, {:.2} ms, V/V0 {:.4}, E_kin {:.3e} J",
                 stats.solver_iterations,
@@ -180,7 +181,8 @@ fn main() {
         d.spring_damping = 50.0;
         d.ground = true;
         d.ground_height = 0.0;
-        d.friction = 0.5;
+        // BODY_FRICTION=<μ>: another friction coefficient (0 settles every drop height alike).
+        d.friction = std::env::var("BODY_FRICTION").ok().and_then(|v| v.parse().ok()).unwrap_or(0.5);
         d.threads = 2;
         // BODY_THREADS=<n>: every row on n threads (a single-threaded zero-gravity run, say, for
         // cachegrind, whose counts are exact only without threads spinning at barriers).
@@ -500,4 +502,40 @@ fn crack_cost(
         softshell_body_free(b);
     }
     result
+}
+
+/// TRACE=1: where the body is and whether its surface folded. The centre of the vertices and
+/// their mean velocity (a ball dropped straight down should not travel sideways), and the faces
+/// whose normal points towards that centre: on a convex ball, none; a fold (a crease of the
+/// contact patch pressed under the ball at the impact, which turns some faces over) shows as tens
+/// of them.
+fn shape_trace(body: *mut SoftshellBody) -> String {
+    // SAFETY: live body; every buffer is sized from the counts it reports.
+    let (x, v, triangles) = unsafe {
+        let n = softshell_body_vertex_count(body);
+        let (mut x, mut v, mut triangles) =
+            (vec![0.0f32; 3 * n], vec![0.0f32; 3 * n], vec![0u32; 3 * softshell_body_triangle_count(body)]);
+        let mut len = 0;
+        softshell_body_copy_positions(body, x.as_mut_ptr(), x.len(), &mut len);
+        softshell_body_copy_velocities(body, v.as_mut_ptr(), v.len(), &mut len);
+        softshell_body_copy_triangles(body, triangles.as_mut_ptr(), triangles.len(), &mut len);
+        (x, v, triangles)
+    };
+    let point = |a: &[f32], i: u32| {
+        glam::DVec3::new(a[3 * i as usize] as f64, a[3 * i as usize + 1] as f64, a[3 * i as usize + 2] as f64)
+    };
+    let n = x.len() / 3;
+    let centre = (0..n as u32).map(|i| point(&x, i)).sum::<glam::DVec3>() / n as f64;
+    let velocity = (0..n as u32).map(|i| point(&v, i)).sum::<glam::DVec3>() / n as f64;
+    let inward = triangles
+        .chunks_exact(3)
+        .filter(|t| {
+            let (a, b, c) = (point(&x, t[0]), point(&x, t[1]), point(&x, t[2]));
+            (b - a).cross(c - a).dot((a + b + c) / 3.0 - centre) < 0.0
+        })
+        .count();
+    format!(
+        "centre ({:.4}, {:.4}, {:.4}) m, its velocity ({:.4}, {:.4}, {:.4}) m/s, {inward} faces turned inward; ",
+        centre.x, centre.y, centre.z, velocity.x, velocity.y, velocity.z
+    )
 }
