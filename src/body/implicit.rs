@@ -48,10 +48,9 @@ use crate::parallel::{SharedSlice, Team, WorkerPool};
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum ContactFilter {
     Free,
-    /// `(v + Δv)·n = 0`, with the normal speed the contact takes away (≥ 0, per unit mass the
-    /// normal impulse): Coulomb friction takes up to `friction` times it off the tangential speed
-    /// after the solve, which also holds a body at rest on a slope inside the friction cone.
-    Slide(Vec3, f32),
+    /// `(v + Δv)·n = 0` for the normal n; Coulomb friction follows the solve, from the
+    /// contact's reactions.
+    Slide(Vec3),
 }
 
 /// The contact filters as the solve's passes read them: per vertex the slot of its contact
@@ -121,11 +120,12 @@ pub(crate) struct ImplicitScratch {
     gas_partial: Vec<f64>,
     /// The contact constraints of the substep (allocated only with obstacles, rewritten by
     /// every assembly): per vertex its slot (u32::MAX: free), and per slot the contact's normal
-    /// and the normal speed it takes away (the friction bound); each chunk's contacts fill the
-    /// first slots of its own rows. The solve reads them as [`ContactRows`].
+    /// and, after the solve, its normal reaction (`contact_reaction`, the friction bound); each
+    /// chunk's contacts fill the first slots of its own rows. The solve reads them as
+    /// [`ContactRows`].
     contact_slot: Vec<u32>,
     contact_normal: Vec<Vec3A>,
-    contact_pushed: Vec<f32>,
+    contact_reaction: Vec<f32>,
     /// Per vertex (with obstacles only): the last substep held it on an obstacle and the
     /// obstacle pushed it (`contact_reaction` >= 0), so this one holds it again while it touches
     /// and does not move away, whatever its own forces say (see `start_vertex`).
@@ -239,7 +239,7 @@ impl ImplicitScratch {
                 + self.p.capacity()
                 + self.ap.capacity())
                 * 16
-            + self.contact_pushed.capacity() * 4
+            + self.contact_reaction.capacity() * 4
             + self.contact_slot.capacity() * 4
             + self.contact_normal.capacity() * 16
             + self.contact_held.capacity()
@@ -335,7 +335,6 @@ struct AssemblyTask<'a> {
     dv: &'a mut [Vec3A],
     contact_slot: &'a mut [u32],
     contact_normal: &'a mut [Vec3A],
-    contact_pushed: &'a mut [f32],
     /// Per row whether the last substep held it on an obstacle that pushed (empty without
     /// obstacles).
     contact_held: &'a [bool],
@@ -431,10 +430,9 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
         if let Some(slot) = t.contact_slot.get_mut(k) {
             *slot = match filter {
                 ContactFilter::Free => u32::MAX,
-                ContactFilter::Slide(normal, pushed) => {
+                ContactFilter::Slide(normal) => {
                     any_contact = true;
                     t.contact_normal[contacts] = normal.into();
-                    t.contact_pushed[contacts] = pushed;
                     contacts += 1;
                     (t.first + contacts - 1) as u32
                 }
@@ -454,9 +452,8 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
 /// obstacle, moving and pushed into it, gets the constraint (v + Δv)·n = 0; so does one the
 /// obstacle held and pushed in the last substep (`held`), even if its own forces now pull it
 /// away: its neighbours may still press it down, which only the reaction after a solve tells.
-/// Coulomb friction
-/// (SPEC 2.3) follows the solve, bounded by the normal speed the contact took away; restitution
-/// with the other integrators' contact response.
+/// Coulomb friction (SPEC 2.3) follows the solve, bounded by the contact's normal reaction
+/// (`substep`); restitution with the other integrators' contact response.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn start_vertex(
@@ -481,10 +478,6 @@ fn start_vertex(
     if v.dot(normal) > 0.0 || (!held && Vec3::from(rhs).dot(normal) > 0.0) {
         return (guess, ContactFilter::Free);
     }
-    // The normal speed the contact takes away (per unit mass the normal impulse), to first
-    // order: what sliding friction may take off.
-    let alone = v + Vec3::from(rhs) * model.inv_mass[i];
-    let pushed = -alone.dot(normal);
     let dv = Vec3::from(guess);
     let dv = dv - normal * (dv.dot(normal) + v.dot(normal));
     // Block Jacobi on the tangent plane: the inverse of the diagonal block restricted to it,
@@ -499,7 +492,7 @@ fn start_vertex(
         restricted.add_outer(dn, -1.0 / ndn);
         *inv_diag = restricted.stored();
     }
-    (dv.into(), ContactFilter::Slide(normal, pushed.max(0.0)))
+    (dv.into(), ContactFilter::Slide(normal))
 }
 
 /// Assembly of one vertex from its springs' sums ([`SpringSums`]): the right side
@@ -874,7 +867,7 @@ struct Shared<'a> {
     inv_diag: SharedSlice<'a, SymmetricBlock>,
     contact_slot: SharedSlice<'a, u32>,
     contact_normal: SharedSlice<'a, Vec3A>,
-    contact_pushed: SharedSlice<'a, f32>,
+    contact_reaction: SharedSlice<'a, f32>,
     contact_held: SharedSlice<'a, bool>,
     terms: SharedSlice<'a, SpringTerms>,
     dv: SharedSlice<'a, Vec3A>,
@@ -1354,7 +1347,7 @@ pub(crate) fn substep(
     if !obstacles.is_empty() {
         s.contact_slot.resize(n, u32::MAX);
         s.contact_normal.resize(n, Vec3A::ZERO);
-        s.contact_pushed.resize(n, 0.0);
+        s.contact_reaction.resize(n, 0.0);
         // A vertex appended by a split starts free (the reaction is measured per vertex).
         s.contact_held.resize(n, false);
     }
@@ -1400,7 +1393,7 @@ pub(crate) fn substep(
         inv_diag: SharedSlice::new(&mut s.inv_diag),
         contact_slot: SharedSlice::new(&mut s.contact_slot),
         contact_normal: SharedSlice::new(&mut s.contact_normal),
-        contact_pushed: SharedSlice::new(&mut s.contact_pushed),
+        contact_reaction: SharedSlice::new(&mut s.contact_reaction),
         contact_held: SharedSlice::new(&mut s.contact_held),
         terms: SharedSlice::new(&mut s.spring_terms),
         dv: SharedSlice::new(&mut s.dv),
@@ -1594,7 +1587,6 @@ pub(crate) fn substep(
                         dv: shared.dv.part(rows.clone()),
                         contact_slot: if has_contact { shared.contact_slot.part(rows.clone()) } else { &mut [] },
                         contact_normal: if has_contact { shared.contact_normal.part(rows.clone()) } else { &mut [] },
-                        contact_pushed: if has_contact { shared.contact_pushed.part(rows.clone()) } else { &mut [] },
                         // (Read only: written by the last pass of the substep.)
                         contact_held: if has_contact { &shared.contact_held.whole()[rows] } else { &[] },
                         gas: shared.gas.part(gas_rows(c)),
@@ -1648,12 +1640,11 @@ pub(crate) fn substep(
         };
         // SAFETY: from here on each member reads and writes only the rows of its own chunks (the
         // contacts are written by nobody; Δv only by the last pass, in its own rows).
-        let (contact, pushed) = unsafe {
+        let contact = unsafe {
             if any_contact {
-                let contact = ContactRows { slot: shared.contact_slot.whole(), normal: shared.contact_normal.whole() };
-                (contact, shared.contact_pushed.whole())
+                ContactRows { slot: shared.contact_slot.whole(), normal: shared.contact_normal.whole() }
             } else {
-                (ContactRows::default(), &[][..])
+                ContactRows::default()
             }
         };
         // Internal forces cannot change the momentum, so Σ m Δv = Σ rhs exactly (every coupling
@@ -1684,8 +1675,9 @@ pub(crate) fn substep(
                 }
             }
         }
-        // v += Δv, friction, x += h v, then the contact response (SPEC 2.3) of each vertex; with
-        // contacts, each one's reaction in the solve (whether the next substep holds it).
+        // With contacts, each one's reactions in the solve first (a pass of its own: the friction
+        // of a vertex reads its neighbours'); then v += Δv, friction, x += h v, and the contact
+        // response (SPEC 2.3) of each vertex.
         let (restitution, friction) = (model.settings.restitution, model.settings.friction);
         let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
         let vertex_fragment = gas_guard.as_deref().map_or(&[][..], |g| &g.vertex_fragment[..]);
@@ -1696,15 +1688,55 @@ pub(crate) fn substep(
             let coupling = (shared.coupling_offsets, shared.couplings.whole());
             (shared.dv.whole(), shared.rhs.whole(), coupling, gradient.whole())
         });
+        // With contacts, first each contact's reactions: the normal one `λ_n` (whether the next
+        // substep holds it, and the friction it can give), and the tangential velocity `δ` that
+        // sticking would take off (in z, free after the solve; zero elsewhere).
+        if let Some((dv_all, rhs, coupling, gradient)) = reactions {
+            team.claim(chunks, |c| {
+                let rows = rows(c);
+                // SAFETY: this member's chunks; x, v, Δv, the right side and the couplings are
+                // written by nobody in this pass.
+                let (v, held, slip, reaction) = unsafe {
+                    (
+                        vs.whole(),
+                        shared.contact_held.part(rows.clone()),
+                        shared.z.part(rows.clone()),
+                        shared.contact_reaction.part(rows.clone()),
+                    )
+                };
+                held.fill(false);
+                slip.fill(Vec3A::ZERO);
+                for (k, i) in rows.clone().enumerate() {
+                    let Some(&slot) = contact.slot.get(i).filter(|&&slot| slot != u32::MAX) else { continue };
+                    if model.inv_mass[i] == 0.0 {
+                        continue;
+                    }
+                    let normal = contact.normal[slot as usize];
+                    let gas = vertex_fragment
+                        .get(i)
+                        .filter(|&&f| f != u32::MAX)
+                        .map(|&f| (Vec3A::from(gradient[i]), end_gas_scale[f as usize]));
+                    let lambda = contact_reaction(model.mass[i], coupling, dv_all, i, rhs[i], gas, normal);
+                    held[k] = lambda >= 0.0;
+                    reaction[slot as usize - rows.start] = lambda;
+                    if lambda > 0.0 && friction > 0.0 {
+                        let after = Vec3A::from(v[i]) + dv_all[i];
+                        slip[k] = after - normal * after.dot(normal);
+                    }
+                }
+            });
+            team.barrier();
+        }
+        // SAFETY: written by the pass above only.
+        let (reaction, slip) = unsafe {
+            if any_contact { (shared.contact_reaction.whole(), shared.z.whole()) } else { (&[][..], &[][..]) }
+        };
+        let (coupling_offsets, couplings) = reactions.map_or((&[][..], &[][..]), |r| r.2);
         team.claim(chunks, |c| {
             let rows = rows(c);
             let first = rows.start;
             // SAFETY: this member's chunks.
             let (x, v, finite) = unsafe { (xs.part(rows.clone()), vs.part(rows.clone()), chunk_finite.part(c..c + 1)) };
-            // SAFETY: this member's chunk (the reactions of its rows; allocated with obstacles).
-            let held =
-                if obstacles.is_empty() { &mut [][..] } else { unsafe { shared.contact_held.part(rows.clone()) } };
-            held.fill(false);
             // Δv, kept as the next substep's warm start (corrected here without contacts, in this
             // member's rows).
             let dv: &[Vec3A] = match reactions {
@@ -1729,22 +1761,28 @@ pub(crate) fn substep(
                 }
                 let v = &mut v[k];
                 *v += Vec3::from(dvi);
-                if let Some(slot) = contact.slot.get(i).filter(|&&slot| slot != u32::MAX) {
-                    let (normal, pushed) = (Vec3::from(contact.normal[*slot as usize]), pushed[*slot as usize]);
-                    if let Some((dv_all, rhs, coupling, gradient)) = reactions {
-                        let gas = vertex_fragment
-                            .get(i)
-                            .filter(|&&f| f != u32::MAX)
-                            .map(|&f| (Vec3A::from(gradient[i]), end_gas_scale[f as usize]));
-                        let reaction = contact_reaction(model.mass[i], coupling, dv_all, i, rhs[i], gas, normal.into());
-                        held[k] = reaction >= 0.0;
-                    }
-                    // SPEC 2.3 Coulomb friction on a sliding contact: the tangential speed drops
-                    // by at most `friction` times the normal speed change, never past zero.
-                    let tangential = *v - normal * v.dot(normal);
-                    let speed = tangential.length();
-                    if speed > 0.0 {
-                        *v -= tangential * ((model.settings.friction * pushed) / speed).min(1.0);
+                if let Some(&slot) = contact.slot.get(i).filter(|&&slot| slot != u32::MAX) {
+                    let normal = contact.normal[slot as usize];
+                    let delta = slip[i];
+                    if delta != Vec3A::ZERO {
+                        // SPEC 2.3 Coulomb friction: sticking takes δ off every contact; the
+                        // tangential impulse that takes at this vertex is its row of A δ (its mass
+                        // and the springs to its neighbours, which stick too or not). Within
+                        // `friction λ_n` it sticks; beyond, it slides with the friction at that
+                        // bound (δ scaled down). (The gas term of A is left out: δ lies along the
+                        // obstacle, across which the gas gradient of a flattened patch points.)
+                        // A bound on the velocity taken off instead (`friction` times the normal
+                        // speed change, as before) is not Coulomb's: a stiff spring lets a vertex
+                        // move only `h f / (m + h² k)` in a step, so that friction held springs
+                        // stretched about ten times beyond the bound (tests/ffi_body_ground.rs:
+                        // a flung cloth kept a strain of 2.0e-3 against 2.2e-4 now; the issue-5
+                        // balloon's contact patch at rest kept 18.7 N s of tangential right side,
+                        // now 0.07), and made energy in a flattened ball.
+                        let mut needed = delta * model.mass[i] + row_coupling_sum(coupling_offsets, couplings, slip, i);
+                        needed -= normal * needed.dot(normal);
+                        let (needed, allowed) = (needed.length(), friction * reaction[slot as usize]);
+                        let share = if needed <= allowed { 1.0 } else { allowed / needed };
+                        *v -= Vec3::from(delta * share);
                     }
                 }
                 x[k] += *v * h;
