@@ -251,7 +251,8 @@ fn main() {
         }
         let mut d = base;
         d.integrator = integrator;
-        d.substeps = substeps;
+        // BODY_SUBSTEPS=<n>: n substeps a step in every row.
+        d.substeps = std::env::var("BODY_SUBSTEPS").ok().and_then(|v| v.parse().ok()).unwrap_or(substeps);
         let explicit = [SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, SOFTSHELL_INTEGRATOR_EXPLICIT_EULER];
         if explicit.contains(&integrator) && iterations == 2 {
             d.spring_damping = 0.5; // the "K_d 0.5" rows
