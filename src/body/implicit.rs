@@ -169,6 +169,12 @@ pub(crate) struct EndEnergies {
 }
 
 impl ImplicitScratch {
+    /// Whether the next substep holds any vertex on an obstacle (`contact_held`).
+    #[cfg(test)]
+    pub fn holds_any_contact(&self) -> bool {
+        self.contact_held.iter().any(|&held| held)
+    }
+
     /// Whether the last substep prepared the next.
     #[cfg(test)]
     pub fn has_prepared(&self) -> bool {
@@ -1643,8 +1649,8 @@ pub(crate) fn substep(
                 (iterations, any_contact, gas_scale(&sys, &gas_dot_dv))
             }
         };
-        // SAFETY: from here on each member reads and writes only the rows of its own chunks (the
-        // contacts are written by nobody; Δv only by the last pass, in its own rows).
+        // SAFETY: from here on each member writes only the rows of its own chunks (the contacts
+        // are written by nobody; Δv only by the last pass, in its own rows).
         let contact = unsafe {
             if any_contact {
                 ContactRows { slot: shared.contact_slot.whole(), normal: shared.contact_normal.whole() }
@@ -1742,6 +1748,12 @@ pub(crate) fn substep(
             let first = rows.start;
             // SAFETY: this member's chunks.
             let (x, v, finite) = unsafe { (xs.part(rows.clone()), vs.part(rows.clone()), chunk_finite.part(c..c + 1)) };
+            if reactions.is_none() && !obstacles.is_empty() {
+                // Nothing touched: nothing is held next substep (the pass above clears them
+                // otherwise).
+                // SAFETY: this member's chunk.
+                unsafe { shared.contact_held.part(rows.clone()) }.fill(false);
+            }
             // Δv, kept as the next substep's warm start (corrected here without contacts, in this
             // member's rows).
             let dv: &[Vec3A] = match reactions {

@@ -1365,4 +1365,29 @@ mod tests {
         }
         assert!(reused.nodes.x.iter().any(|x| x.y < -1.1), "the ball reached the ground");
     }
+
+    /// The contacts the implicit integrator holds for the next substep (those the ground pushed
+    /// in the last one) are forgotten by a step in which nothing touches: a ball lifted off the
+    /// ground after resting on it holds nothing when it lands again.
+    #[test]
+    fn a_step_without_contacts_holds_nothing_for_the_next() {
+        let mut body = ball(2);
+        let holds = |b: &Body| matches!(&b.scratch, Scratch::Implicit(s) if s.holds_any_contact());
+        let mut steps = 0;
+        while !holds(&body) {
+            body.step().unwrap();
+            steps += 1;
+            assert!(steps < 120, "the ball never pressed on the ground");
+        }
+        for x in &mut body.nodes.x {
+            x.y += 1.0;
+        }
+        body.nodes.v.fill(Vec3::ZERO);
+        if let Scratch::Implicit(s) = &mut body.scratch {
+            s.forget_prepared();
+        }
+        body.energy_now = None;
+        body.step().unwrap();
+        assert!(!holds(&body), "a step in the air kept contacts held");
+    }
 }
