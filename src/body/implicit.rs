@@ -1798,8 +1798,8 @@ pub(crate) fn substep(
                         //
                         // Measured on the issue-5 balloon (benches/body_balloon.rs, seven drops 0
                         // to 25 mm higher, 8.6 CG iterations a step with this) and not kept:
-                        // - the vertices that stuck held by the next solve (`v + Δv = 0`, every
-                        //   component filtered; released when their reaction leaves the cone):
+                        // - holding the vertices that stuck inside the next solve (`v + Δv = 0`,
+                        //   every component filtered; released when the reaction leaves the cone):
                         //   17.6, and 17 a step at rest instead of 4.3. The coarse level still
                         //   moves the stuck vertices (its matrix does not know them), so its
                         //   correction no longer fits; without the coarse level sticking helps a
