@@ -86,8 +86,6 @@ pub fn icosphere(levels: u32, radius: f32) -> (Vec<f32>, Vec<u32>) {
     (positions, f.into_iter().flatten().collect())
 }
 
-/// A flat cloth of `n` x `n` vertices in the x-y plane (spacing `size / (n - 1)`), hanging down
-/// from y = 0; vertex `row * n + column`.
 /// `Σ L0²` over the edges of a mesh (each edge once).
 pub fn sum_rest_squared(p: &[f32], t: &[u32]) -> f64 {
     let mut seen = std::collections::HashSet::new();
@@ -103,6 +101,8 @@ pub fn sum_rest_squared(p: &[f32], t: &[u32]) -> f64 {
     sum
 }
 
+/// A flat cloth of `n` x `n` vertices in the x-y plane (spacing `size / (n - 1)`), hanging down
+/// from y = 0; vertex `row * n + column`.
 pub fn cloth(n: u32, size: f32) -> (Vec<f32>, Vec<u32>) {
     let mut positions = Vec::new();
     for row in 0..n {
