@@ -285,6 +285,30 @@ const CG_RELATIVE_TOLERANCE: f64 = 3e-3;
 /// 7.2e-2 m.
 const CG_FORCE_TOLERANCE: f64 = 1e-4;
 
+/// A contact held from the last substep stays held against a pull of its own forces (`n·rhs`)
+/// of at most this fraction of its force scale (`h Σ|f|`, as in [`CG_FORCE_TOLERANCE`]); a
+/// harder pull releases it. Holding lets the neighbours that press a vertex down keep it down
+/// (only the reaction after the solve tells whether they do), and without it a balloon at rest
+/// chatters on the ground (22.7 against 6.1 CG iterations a step, tests/ffi_body_ground.rs). But
+/// a held vertex pulled hard is held by a sticky obstacle, with a force no neighbour gives: at an
+/// impact that creased the contact patch under the issue-5 balloon in 3 of 10 drops (1 thread,
+/// drop heights 0 to 25 mm above the issue's), and the crease never opened (a spring surface has
+/// no bending stiffness). Measured on those 10 drops (benches/body_balloon.rs,
+/// `BODY_DROP_OFFSET`), creased drops and CG iterations a step: no limit 3 and 10.75; a limit of
+/// 2, 1, 0.5, 0.25 and 0.1 of the force scale 3, 2, 0, 0 and 0 drops, 10.75, 10.06, 8.44, 8.72 and
+/// 8.97 iterations; on eight drops 3 cm to 1 m higher, none with 0.25 or 0.1 against 2 without.
+/// Releasing every held contact that pulled (a second solve with them released, the active-set
+/// way) creased none either but took 10.1-10.4 iterations a step. The issue's own drop, which
+/// did not crease, takes 9.5 iterations a step with this limit against 7.5 without: its rim no
+/// longer sticks.
+///
+/// With 4 substeps a step the impact crumples the lower half of that balloon whatever the
+/// contacts do (at step 50 of a drop 1119 faces turned inward, V/V0 0.78; and the same with no
+/// holding at all): a spring surface without bending stiffness or self-contact buckles under a
+/// 5.4 m/s impact, and the larger numerical damping of one step of implicit Euler is what
+/// smooths it at h = 1/60 s.
+const HELD_PULL_SHARE: f32 = 0.1;
+
 /// Vertices per parallel chunk (fixed, so the result does not depend on the thread count; whole
 /// slices of the coupling layout).
 const CHUNK: usize = 1024;
@@ -431,7 +455,9 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
         });
         let (rhs, mut inv_diag, magnitude) = assemble_vertex(sys, springs, i, f, gas_dot_v);
         let held = t.contact_held.get(k).copied().unwrap_or(false);
-        let (dv, filter) = start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, t.dv[k], held, &mut inv_diag);
+        let hold_limit = HELD_PULL_SHARE * sys.h * magnitude;
+        let (dv, filter) =
+            start_vertex(model, obstacles, i, sys.x[i], sys.v[i], rhs, t.dv[k], held, hold_limit, &mut inv_diag);
         t.rhs[k] = rhs;
         t.inv_diag[k] = inv_diag;
         t.dv[k] = dv;
@@ -462,7 +488,8 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
 /// Contacts inside the solve (Baraff and Witkin 1998, modified PCG): a vertex resting on an
 /// obstacle, moving and pushed into it, gets the constraint (v + Δv)·n = 0; so does one the
 /// obstacle held and pushed in the last substep (`held`), even if its own forces now pull it
-/// away: its neighbours may still press it down, which only the reaction after a solve tells.
+/// away by up to `hold_limit` ([`HELD_PULL_SHARE`]): its neighbours may still press it down,
+/// which only the reaction after a solve tells.
 /// Coulomb friction (SPEC 2.3) follows the solve, bounded by the contact's normal reaction
 /// (`substep`); restitution with the other integrators' contact response.
 #[allow(clippy::too_many_arguments)]
@@ -476,6 +503,7 @@ fn start_vertex(
     rhs: Vec3A,
     guess: Vec3A,
     held: bool,
+    hold_limit: f32,
     inv_diag: &mut SymmetricBlock,
 ) -> (Vec3A, ContactFilter) {
     if model.inv_mass[i] == 0.0 {
@@ -484,9 +512,10 @@ fn start_vertex(
     let Some(normal) = (!obstacles.is_empty()).then(|| touching(x, obstacles, 1e-6)).flatten() else {
         return (guess, ContactFilter::Free);
     };
-    // Released when moving away, or pulled away by its own forces unless it was held (the
-    // contact cannot pull).
-    if v.dot(normal) > 0.0 || (!held && Vec3::from(rhs).dot(normal) > 0.0) {
+    // Released when moving away, or pulled away by its own forces unless it was held and they
+    // pull it by at most `hold_limit` (the contact cannot pull).
+    let pull = Vec3::from(rhs).dot(normal);
+    if v.dot(normal) > 0.0 || (pull > 0.0 && (!held || pull > hold_limit)) {
         return (guess, ContactFilter::Free);
     }
     let dv = Vec3::from(guess);
