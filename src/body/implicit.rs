@@ -128,8 +128,13 @@ pub(crate) struct ImplicitScratch {
     contact_reaction: Vec<f32>,
     /// Per vertex (with obstacles only): the last substep held it on an obstacle and the
     /// obstacle pushed it (`contact_reaction` >= 0), so this one holds it again while it touches
-    /// and does not move away, whatever its own forces say (see `start_vertex`).
+    /// and does not move away, unless its own forces pull it off hard (see `start_vertex`).
     contact_held: Vec<bool>,
+    /// A fault for tests of the step's blow-up rule: every substep moves the positions
+    /// `1 + test_gain` times as far as its velocities say, overshooting as a diverging
+    /// linearised step does (the end state is measured after it, as a real one would be).
+    #[cfg(test)]
+    pub test_gain: f32,
     /// The coarse level of the preconditioner (made on the first substep) and the substep
     /// length it was made (or tried) for.
     coarse: Option<CoarseSpace>,
@@ -1577,6 +1582,8 @@ pub(crate) fn substep(
             team.barrier();
         }
     };
+    #[cfg(test)]
+    let test_gain = s.test_gain;
     let iterations = pool.team(|team| {
         if !reuse {
             state_pass(team, gradient_in_team.then_some(&gas_origin[..]), false);
@@ -1849,6 +1856,10 @@ pub(crate) fn substep(
                     }
                 }
                 x[k] += *v * h;
+                #[cfg(test)]
+                {
+                    x[k] += *v * (h * test_gain);
+                }
                 if !obstacles.is_empty() {
                     resolve(&mut x[k], v, obstacles, restitution, friction);
                 }
