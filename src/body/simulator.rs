@@ -1291,21 +1291,19 @@ mod tests {
         TriMesh::new(p, t).unwrap()
     }
 
-    /// A gas ball dropped on the ground with the implicit integrator (which prepares each next
-    /// step at the end of the last).
-    fn ball(threads: u32) -> Body {
+    /// A gas ball (radius 1, nRT = 200, no leak) stepped by implicit Euler (which prepares each
+    /// next step at the end of the last), with `settings` for the rest.
+    fn implicit_gas_ball(settings: BodySettings) -> Body {
         let mesh = sphere(3);
         let topology = Topology::build(mesh.triangles(), mesh.positions().len());
-        let settings = BodySettings {
-            integrator: Integrator::ImplicitEuler,
-            gas_amount: 200.0,
-            ground: true,
-            ground_height: -1.2,
-            leak_rate: 0.0,
-            threads,
-            ..BodySettings::default()
-        };
+        let settings =
+            BodySettings { integrator: Integrator::ImplicitEuler, gas_amount: 200.0, leak_rate: 0.0, ..settings };
         Body::new(&mesh, &topology, settings).unwrap()
+    }
+
+    /// The gas ball dropped on the ground.
+    fn ball(threads: u32) -> Body {
+        implicit_gas_ball(BodySettings { ground: true, ground_height: -1.2, threads, ..BodySettings::default() })
     }
 
     /// A new implicit body has its coarse level for its substep length already (made when the
@@ -1378,19 +1376,8 @@ mod tests {
     #[test]
     fn an_implicit_step_making_energy_in_the_springs_is_rolled_back_as_unstable() {
         // The gas ball floating without gravity.
-        let floating = || {
-            let mesh = sphere(3);
-            let topology = Topology::build(mesh.triangles(), mesh.positions().len());
-            let settings = BodySettings {
-                integrator: Integrator::ImplicitEuler,
-                gas_amount: 200.0,
-                gravity: Vec3::ZERO,
-                leak_rate: 0.0,
-                threads: 2,
-                ..BodySettings::default()
-            };
-            Body::new(&mesh, &topology, settings).unwrap()
-        };
+        let floating =
+            || implicit_gas_ball(BodySettings { gravity: Vec3::ZERO, threads: 2, ..BodySettings::default() });
         let (mut body, mut control) = (floating(), floating());
         if let Scratch::Implicit(s) = &mut body.scratch {
             s.test_gain = 2.0;
