@@ -49,6 +49,21 @@
 //! (on both sides, so the preconditioner stays symmetric) made every contact step slower:
 //! 15 -> 17, 17 -> 22 and 20 -> 23 iterations for a ball that holds, 49 -> 53 and 66 -> 72 in
 //! the storm.
+//!
+//! Smoothed aggregation (the prolongation `(I - ω D⁻¹ A_s) P` of the scalar matrix `A_s` below,
+//! and the Galerkin coarse matrix `Pᵀ A_s P` of it), measured on the issue-5 balloon
+//! (benches/body_balloon.rs, one thread, five or ten drops 0 to 25 mm higher than the issue's,
+//! CG iterations a step; with this level 9.12 over the five, 8.97 over the ten) and not kept:
+//! what it saves in iterations it costs in the coarse work of each one (the factor's two solves
+//! and the restriction were about a fifth of a step, at about the same cost per entry):
+//! - on these aggregates, ω = 0.67 or 0.9: 7.28 and 7.08 (five drops), but the smoothed
+//!   aggregates reach two apart, so the factor has 71,097 entries against 36,620, and the
+//!   prolongation 26,806 against one per vertex (10,242);
+//! - the same with the coarse matrix cut back to this level's pattern (the rest added to the
+//!   diagonal): 8.26, with a factor as large as this one's;
+//! - on pairs of these aggregates (594, matched along the most springs): 8.62 (ten drops), a
+//!   factor of 23,912 entries and a prolongation of 22,281;
+//! - on two passes of aggregation (132 aggregates): 12.4 (five drops).
 
 use glam::{Vec3, Vec3A};
 

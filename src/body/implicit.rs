@@ -1384,7 +1384,12 @@ pub(crate) fn substep(
     //   vectors cost about what the 0.8 iterations a step it saves do;
     // - a few CG iterations on the contact patch and two rings around it (which hold 95-100% of
     //   the first residual during the wobble) before the global solve: 3,482 with 3 of them, 3,497
-    //   with 12, which moved the residual out of the patch (down 3-5x), not away.
+    //   with 12, which moved the residual out of the patch (down 3-5x), not away;
+    // - extrapolating from the last two (Δv + θ (Δv - Δv before), measured after
+    //   `HELD_PULL_SHARE`, CG iterations a step): θ from 0.3 to 1 took the drop from 9.5
+    //   to 9.6-11.7; θ from -0.1 to -0.5 (a weighted mean of the two) took ten drops 0 to 25 mm
+    //   higher from 8.97 to 8.36-8.63 but the h = 1/15 s row from 13.38 to 14.12, and the mean
+    //   only where a vertex's Δv turned back took 8.54-9.04.
     if s.dv.len() != n {
         let g = Vec3A::from(model.settings.gravity * h);
         s.dv.clear();
