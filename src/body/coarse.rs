@@ -1,9 +1,9 @@
 //! The coarse level of the implicit integrator's preconditioner (SPEC 2.2): vertices grouped
 //! into small aggregates (a vertex and its neighbours), and the constant scalar matrix
-//! `Pᵀ (M + c (h² K_s + h K_d) L) P` of the aggregates, factored once. The block-Jacobi
-//! preconditioner resolves what happens at one vertex; this level moves whole patches at once,
-//! the smooth deformations (a resting ball carrying its weight to the contact patch, a bounce)
-//! that a one-vertex preconditioner leaves to many iterations.
+//! `Pᵀ (M + c (h² K_s + h K_d) L) P / w` of the aggregates ([`COARSE_WEIGHT`] w), factored once.
+//! The block-Jacobi preconditioner resolves what happens at one vertex; this level moves whole
+//! patches at once, the smooth deformations (a resting ball carrying its weight to the contact
+//! patch, a bounce) that a one-vertex preconditioner leaves to many iterations.
 //!
 //! The matrix does not follow the springs' directions or a topology change: it only has to be
 //! positive definite to keep conjugate gradients correct, and near enough to the system to
@@ -53,7 +53,8 @@
 //! Smoothed aggregation (the prolongation `(I - ω D⁻¹ A_s) P` of the scalar matrix `A_s` below,
 //! and the Galerkin coarse matrix `Pᵀ A_s P` of it), measured on the issue-5 balloon
 //! (benches/body_balloon.rs, one thread, five or ten drops 0 to 25 mm higher than the issue's,
-//! CG iterations a step; with this level 9.12 over the five, 8.97 over the ten) and not kept:
+//! CG iterations a step; with this level, at full weight ([`COARSE_WEIGHT`] 1), 9.12 over the
+//! five, 8.97 over the ten) and not kept:
 //! what it saves in iterations it costs in the coarse work of each one (the factor's two solves
 //! and the restriction were about a fifth of a step, at about the same cost per entry):
 //! - on these aggregates, ω = 0.67 or 0.9: 7.28 and 7.08 (five drops), but the smoothed
@@ -78,6 +79,18 @@ use crate::parallel::WorkerPool;
 /// tangent-plane blocks at contacts) 0.4 to 0.65 give the same CG iterations (25 per step), 0.25
 /// gives 34 and 1.0 gives 29.
 const SPRING_SHARE: f64 = 0.5;
+
+/// The weight of the coarse correction in the preconditioner `D⁻¹ + w P A_c⁻¹ Pᵀ` (the coarse
+/// matrix divided by it): the block-Jacobi part and this level both resolve the modes between a
+/// vertex and an aggregate, and at full weight their sum overstates those. Measured on the
+/// issue-5 balloon (benches/body_balloon.rs, one thread, CG iterations a step), weights 1, 0.8,
+/// 0.7, 0.6, 0.5 and 0.4: over ten drops 0 to 25 mm higher than the issue's 8.97, 8.59, 8.70,
+/// 8.51, 8.47 and 8.64; at h = 1/15 s (six drops) 13.97 with 1, 13.02 with 0.6, 12.63 with 0.5
+/// and 13.12 with 0.4; the issue's drop 9.5 -> 8.4 (and 14.6 -> 11.3 at h = 1/15 s); the
+/// zero-gravity balloon 4.3 -> 4.4; the burst's storm steps 47, 58 and 62 -> 46, 56 and 61
+/// (with 0.6). Scaling only the springs' share (0.83 for 0.5, 8.63) or only the mass (8.73)
+/// gave about the same: it is the weight that counts. Costs nothing per iteration.
+const COARSE_WEIGHT: f64 = 0.5;
 
 /// Aggregation passes: each groups the current nodes into a node and its free neighbours, the
 /// leftovers joining a neighbouring group (about 16 to 1 on the balloon: 642 aggregates of its
@@ -267,10 +280,10 @@ impl CoarseSpace {
         }
         for (a, d) in diagonal.iter_mut().enumerate() {
             let edges: f64 = graph.weights[graph.offsets[a] as usize..graph.offsets[a + 1] as usize].iter().sum();
-            *d += w * edges;
+            *d = (*d + w * edges) / COARSE_WEIGHT;
             center[a] /= members[a].max(1) as f32;
         }
-        let values: Vec<f64> = graph.weights.iter().map(|&e| -w * e).collect();
+        let values: Vec<f64> = graph.weights.iter().map(|&e| -w * e / COARSE_WEIGHT).collect();
         let factor = Cholesky::factor(&diagonal, &graph.offsets, &graph.neighbors, &values, &center)?;
         let mut space = Self {
             aggregate: vertex_group,
