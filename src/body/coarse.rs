@@ -92,6 +92,22 @@ const SPRING_SHARE: f64 = 0.5;
 /// gave about the same: it is the weight that counts. Costs nothing per iteration.
 const COARSE_WEIGHT: f64 = 0.5;
 
+/// The factor of the coarse matrix is incomplete: its entries in the row of an aggregate that
+/// are under `DROP_SCALE √(m / A_c)` of the row's diagonal entry are left out (`m` the
+/// aggregate's mass, `A_c` its diagonal entry of the coarse matrix; see [`Cholesky::factor`]).
+/// Most of an exact factor's entries are small, and the CG iterations do not miss them: on the
+/// issue-5 balloon (benches/body_balloon.rs, one thread, CG iterations a step; ten drops 0 to
+/// 25 mm higher than the issue's at h = 1/60 s, six at 1/15 s) the exact factor has 36,620
+/// entries and takes 8.47 and 12.63 iterations; with `DROP_SCALE` 0.1, 16,418 and 24,691 entries
+/// and 8.43 and 13.22 iterations; with 0.2, 12,556 and 20,526 entries and 8.54 and 12.92. A
+/// threshold without the mass share (0.01 of the diagonal) kept about 12,000 entries at both
+/// steps and took 8.45 and 14.85: where the mass is a smaller share of the diagonal (a longer
+/// step, stiffer springs) the coarse matrix couples the aggregates further, and its factor's
+/// entries fall off more slowly with the distance, so the threshold falls with that share. The
+/// zero-gravity balloon takes 4.4 iterations a step either way, and the burst's storm steps 35,
+/// 55 and 56 against 36, 55 and 60. The solves stream the factor's entries twice per iteration.
+const DROP_SCALE: f64 = 0.2;
+
 /// Aggregation passes: each groups the current nodes into a node and its free neighbours, the
 /// leftovers joining a neighbouring group (about 16 to 1 on the balloon: 642 aggregates of its
 /// 10,242 vertices, 17.7k entries in the factor). Measured as above: one pass takes the CG
@@ -270,10 +286,12 @@ impl CoarseSpace {
         let w = SPRING_SHARE
             * ((h * h * model.settings.spring_stiffness) as f64 + (h * model.settings.spring_damping) as f64);
         let mut diagonal = vec![0.0f64; count];
+        let mut mass = vec![0.0f64; count];
         let mut center = vec![Vec3::ZERO; count];
         let mut members = vec![0u32; count];
         for i in 0..n {
             let g = vertex_group[i] as usize;
+            mass[g] += model.mass[i] as f64;
             diagonal[g] += model.mass[i] as f64;
             center[g] += x[i];
             members[g] += 1;
@@ -284,7 +302,9 @@ impl CoarseSpace {
             center[a] /= members[a].max(1) as f32;
         }
         let values: Vec<f64> = graph.weights.iter().map(|&e| -w * e / COARSE_WEIGHT).collect();
-        let factor = Cholesky::factor(&diagonal, &graph.offsets, &graph.neighbors, &values, &center)?;
+        // Per aggregate, the share of its mass in its diagonal (the weight cancels).
+        let drop: Vec<f64> = (0..count).map(|a| DROP_SCALE * (mass[a] / COARSE_WEIGHT / diagonal[a]).sqrt()).collect();
+        let factor = Cholesky::factor(&diagonal, &graph.offsets, &graph.neighbors, &values, &center, &drop)?;
         let mut space = Self {
             aggregate: vertex_group,
             factor,
