@@ -65,6 +65,13 @@
 //! - on pairs of these aggregates (594, matched along the most springs): 8.62 (ten drops), a
 //!   factor of 23,912 entries and a prolongation of 22,281;
 //! - on two passes of aggregation (132 aggregates): 12.4 (five drops).
+//!
+//! Measured again with the weight and the incomplete factor ([`COARSE_WEIGHT`] 0.5,
+//! [`DROP_SCALE`] 0.2; ten drops, 8.54 iterations a step with this level): on these aggregates
+//! 6.65 (the factor then has 10,242 entries, against 12,556), but a step was slower, not faster:
+//! the mean over steps of each step's fastest of five alternating runs (one thread, the issue's
+//! drop) 3.45 against 3.20 ms, with a prototype that prolongs in a pass of its own (the
+//! restriction and the prolongation stream 26,806 weighted entries each).
 
 use glam::{Vec3, Vec3A};
 
@@ -115,7 +122,10 @@ const DROP_SCALE: f64 = 0.2;
 /// only to 37 and 12 (the coarse matrix then misses too much of the springs' stiffness inside
 /// each aggregate); three passes to 49. Smaller aggregates (leftovers grouped among themselves:
 /// 2,121 of them) save under one iteration per step (7.2 to 6.4 with the contact blocks) and cost
-/// more than that in the coarse solve. In the Morton order the body stores its vertices in
+/// more than that in the coarse solve; measured again with the weight and the incomplete factor
+/// (2,235 aggregates, 25,564 entries in the factor against 12,556): 8.54 -> 7.56 iterations a step
+/// over ten drops, but the drop took 2.78 against 2.66 ms a step (the mean over steps of
+/// each step's fastest of five alternating runs, one thread). In the Morton order the body stores its vertices in
 /// (`vertex_order`) this pass makes 1,167 aggregates (606 KB of factor); visiting the vertices
 /// with a stride instead (3, 17, 101 or 7,919) makes 959-986 (490-520 KB) but takes 7.1-7.3
 /// iterations per step instead of 6.3.
