@@ -71,7 +71,13 @@
 //! 6.65 (the factor then has 10,242 entries, against 12,556), but a step was slower, not faster:
 //! the mean over steps of each step's fastest of five alternating runs (one thread, the issue's
 //! drop) 3.45 against 3.20 ms, with a prototype that prolongs in a pass of its own (the
-//! restriction and the prolongation stream 26,806 weighted entries each).
+//! restriction and the prolongation stream 26,806 weighted entries each). Built in (the
+//! Galerkin matrix assembled per aggregate, each vertex's weighted correction summed in the
+//! direction pass, a split vertex taking its origin's weights): 6.4 iterations a step on the
+//! issue's drop against 8.3 (3.1 against 4.4 without gravity, 11.3 against 12.4 at h = 1/15 s),
+//! but no faster: the same mean of fastest steps 2.74 against 2.71 ms on one thread, 2.10
+//! against 2.00 on two. Its direction pass took 16% of a step against 9%, its restriction 6%
+//! against 3% (a vertex takes 2.6 entries on average, 1 to 4, in a loop of its own).
 
 use glam::{Vec3, Vec3A};
 
@@ -125,8 +131,9 @@ const DROP_SCALE: f64 = 0.2;
 /// more than that in the coarse solve; measured again with the weight and the incomplete factor
 /// (2,235 aggregates, 25,564 entries in the factor against 12,556): 8.54 -> 7.56 iterations a step
 /// over ten drops, but the drop took 2.78 against 2.66 ms a step (the mean over steps of
-/// each step's fastest of five alternating runs, one thread). In the Morton order the body stores its vertices in
-/// (`vertex_order`) this pass makes 1,167 aggregates (606 KB of factor); visiting the vertices
+/// each step's fastest of five alternating runs, one thread). In the Morton order the body
+/// stores its vertices in (`vertex_order`) this pass makes 1,167 aggregates (606 KB of an exact
+/// factor); visiting the vertices
 /// with a stride instead (3, 17, 101 or 7,919) makes 959-986 (490-520 KB) but takes 7.1-7.3
 /// iterations per step instead of 6.3.
 const PASSES: usize = 1;
