@@ -221,6 +221,7 @@ impl Cholesky {
         drop: &[f64],
     ) -> Option<Self> {
         let n = diagonal.len();
+        assert!(drop.is_empty() || drop.len() == n, "{} drop thresholds for {n} rows", drop.len());
         let (perm, parts) = nested_dissection(offsets, neighbors, pos);
         let mut inverse = vec![0u32; n];
         for (k, &i) in perm.iter().enumerate() {
