@@ -15,7 +15,7 @@
 //!
 //! Measured and not kept: one copy of the factor (by rows; the backward solve scattering along
 //! them instead of gathering along the columns) halves its bytes (606 to 314 KB on the issue-5
-//! balloon's coarse level, which the solves stream twice per CG iteration) and took about a
+//! balloon's coarse level when its factor was exact, which the solves stream twice per CG iteration) and took about a
 //! fifth off the backward solve (its share of a profile), about 1% of a step. Its sums run in
 //! one chain per row of the solution; over six drops of the balloon (benches/body_balloon.rs,
 //! `BODY_DROP_OFFSET`) it took 6.48 CG iterations per step against 6.35 for these solves (the
@@ -30,7 +30,8 @@ use crate::parallel::WorkerPool;
 /// [`WeightedSum`]) with the fastest weighted sum of this processor. With AVX2 and FMA (checked
 /// at run time: the library is built for baseline x86-64) it runs `$avx`, a function with those
 /// features enabled into which `$with` (`#[inline(always)]`) and the kernel inline, so the
-/// loop has no call per row (a row of the coarse factor has about 31 entries).
+/// loop has no call per row (a row of the balloon's coarse factor has about 11 entries, 31 when
+/// it was exact).
 macro_rules! dispatched {
     ($(#[$doc:meta])* fn $name:ident / $avx:ident / $with:ident($($arg:ident: $ty:ty),* $(,)?)) => {
         $(#[$doc])*
@@ -637,8 +638,9 @@ impl WeightedSum {
 
 /// `Σ y[index[p]] value[p]` in four running sums (entries p mod 4), added as `(s0 + s1) +
 /// (s2 + s3)`: with one running sum each entry waited for the previous one's addition (4
-/// cycles), which set the pace of the triangular solves (a row of the balloon's coarse factor has
-/// about 31 entries). The order is fixed by the row, so the bits do not depend on the thread count.
+/// cycles), which set the pace of the triangular solves (a row of the balloon's exact coarse
+/// factor had about 31 entries). The order is fixed by the row, so the bits do not depend on the
+/// thread count.
 #[inline(always)]
 fn weighted_sum(y: &[Vec3A], index: &[u32], value: &[f32]) -> Vec3A {
     let mut sums = [Vec3A::ZERO; 4];
