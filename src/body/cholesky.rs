@@ -15,8 +15,9 @@
 //!
 //! Measured and not kept: one copy of the factor (by rows; the backward solve scattering along
 //! them instead of gathering along the columns) halves its bytes (606 to 314 KB on the issue-5
-//! balloon's coarse level when its factor was exact, which the solves stream twice per CG iteration) and took about a
-//! fifth off the backward solve (its share of a profile), about 1% of a step. Its sums run in
+//! balloon's coarse level when its factor was exact, which the solves stream twice per CG
+//! iteration) and took about a fifth off the backward solve (its share of a profile), about 1%
+//! of a step. Its sums run in
 //! one chain per row of the solution; over six drops of the balloon (benches/body_balloon.rs,
 //! `BODY_DROP_OFFSET`) it took 6.48 CG iterations per step against 6.35 for these solves (the
 //! drops spread by 0.3 either way), so no gain could be shown.
@@ -63,7 +64,7 @@ const LEAF: usize = 48;
 
 /// Subtrees with fewer rows than this are solved on one thread: half of one (a few thousand
 /// entries of L, some microseconds) is about what handing a task to another thread costs. The
-/// coarse level of the balloon (642 rows, 17.7k entries) splits once.
+/// coarse level of the balloon (1,167 rows, 12.6k entries) splits once.
 const PARALLEL_MIN: usize = 512;
 
 /// A node of the dissection tree: the new indices `start..end` are its two halves (`left`, then

@@ -54,9 +54,9 @@
 //! and the Galerkin coarse matrix `Pᵀ A_s P` of it), measured on the issue-5 balloon
 //! (benches/body_balloon.rs, one thread, five or ten drops 0 to 25 mm higher than the issue's,
 //! CG iterations a step; with this level, at full weight ([`COARSE_WEIGHT`] 1), 9.12 over the
-//! five, 8.97 over the ten) and not kept:
-//! what it saves in iterations it costs in the coarse work of each one (the factor's two solves
-//! and the restriction were about a fifth of a step, at about the same cost per entry):
+//! five, 8.97 over the ten) and not kept: what it saves in iterations it costs in the coarse
+//! work of each one (the factor's two solves and the restriction were about a fifth of a step,
+//! at about the same cost per entry):
 //! - on these aggregates, ω = 0.67 or 0.9: 7.28 and 7.08 (five drops), but the smoothed
 //!   aggregates reach two apart, so the factor has 71,097 entries against 36,620, and the
 //!   prolongation 26,806 against one per vertex (10,242);
@@ -133,9 +133,8 @@ const DROP_SCALE: f64 = 0.2;
 /// over ten drops, but the issue's drop took 2.78 against 2.66 ms a step (the mean over steps of
 /// each step's fastest of five alternating runs, one thread). In the Morton order the body
 /// stores its vertices in (`vertex_order`) this pass makes 1,167 aggregates (606 KB of an exact
-/// factor); visiting the vertices
-/// with a stride instead (3, 17, 101 or 7,919) makes 959-986 (490-520 KB) but takes 7.1-7.3
-/// iterations per step instead of 6.3.
+/// factor); visiting the vertices with a stride instead (3, 17, 101 or 7,919) makes 959-986
+/// (490-520 KB) but takes 7.1-7.3 iterations per step instead of 6.3.
 const PASSES: usize = 1;
 
 pub(crate) struct CoarseSpace {
