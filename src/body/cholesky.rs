@@ -64,7 +64,8 @@ const LEAF: usize = 48;
 
 /// Subtrees with fewer rows than this are solved on one thread: half of one (a few thousand
 /// entries of L, some microseconds) is about what handing a task to another thread costs. The
-/// coarse level of the balloon (1,167 rows, 12.6k entries) splits once.
+/// coarse level of the balloon (1,167 rows, 12.6k entries) splits into halves of 510 and 584
+/// rows, and the second once more.
 const PARALLEL_MIN: usize = 512;
 
 /// A node of the dissection tree: the new indices `start..end` are its two halves (`left`, then
@@ -126,6 +127,9 @@ fn keep_large_entries(
     for k in 0..n {
         row_ptr[k + 1] = row_ptr[k] + row_count[k];
     }
+    // (Kept for the body's life, and counted in its memory.)
+    rows.shrink_to_fit();
+    values.shrink_to_fit();
     (ptr, rows, values, row_ptr)
 }
 
@@ -209,9 +213,9 @@ impl Cholesky {
     /// `neighbors[offsets[i]..offsets[i+1]]` / `values[..]` (symmetric, each pair listed from
     /// both ends). `pos` guides the ordering. Returns `None` if A is not positive definite.
     ///
-    /// With `drop` (one threshold per row of A; empty: none) the factor is incomplete: once A is
-    /// factored, the entries of L in row i smaller than `drop[i]` times that row's diagonal entry
-    /// are left out. `L̃ L̃ᵀ` is still symmetric positive definite (a triangular factor with a
+    /// With `drop_tolerance` (one threshold per row of A, each at least 0; empty: none) the
+    /// factor is incomplete: once A is factored, the entries of the row of L that A's row i
+    /// became smaller than `drop_tolerance[i]` times that row's diagonal entry are left out. `L̃ L̃ᵀ` is still symmetric positive definite (a triangular factor with a
     /// positive diagonal), so the solves are still a correct preconditioner for conjugate
     /// gradients, only a less exact one, at fewer entries per solve (see `coarse`).
     pub fn factor(
@@ -220,10 +224,14 @@ impl Cholesky {
         neighbors: &[u32],
         values: &[f64],
         pos: &[Vec3],
-        drop: &[f64],
+        drop_tolerance: &[f64],
     ) -> Option<Self> {
         let n = diagonal.len();
-        assert!(drop.is_empty() || drop.len() == n, "{} drop thresholds for {n} rows", drop.len());
+        assert!(
+            drop_tolerance.is_empty() || (drop_tolerance.len() == n && drop_tolerance.iter().all(|&t| t >= 0.0)),
+            "drop tolerances for {n} rows: {} given, or not all at least 0",
+            drop_tolerance.len()
+        );
         let (perm, parts) = nested_dissection(offsets, neighbors, pos);
         let mut inverse = vec![0u32; n];
         for (k, &i) in perm.iter().enumerate() {
@@ -334,8 +342,8 @@ impl Cholesky {
             diag[k] = d.sqrt();
             row_ptr[k + 1] = row_ptr[k] + pattern.len() as u32;
         }
-        if !drop.is_empty() {
-            let threshold = |k: usize| drop[perm[k] as usize] * diag[k];
+        if !drop_tolerance.is_empty() {
+            let threshold = |k: usize| drop_tolerance[perm[k] as usize] * diag[k];
             (col_ptr, col_row, col_val64, row_ptr) = keep_large_entries(&col_ptr, &col_row, &col_val64, threshold);
         }
         let nnz = col_row.len();
@@ -872,9 +880,19 @@ mod tests {
         }
         assert!(chol.fill() < n * 40, "fill {}", chol.fill());
 
-        // The split solve of a team (`implicit::Shared::coarse_part`): each half forward in a
-        // copy of its own with its part of the top separator, then in each copy the separator
-        // and that copy's half backward. The halves' rows together are the whole solve's.
+        let whole = first.unwrap();
+        let solved = split_solve(&chol, &b);
+        for (got, want) in solved.iter().zip(&whole) {
+            assert!((*got - *want).abs().max_element() <= 1e-4 * (1.0 + want.abs().max_element()), "{got} vs {want}");
+        }
+    }
+
+    /// The split solve of a team (`implicit::Shared::coarse_part`): each half forward in a copy
+    /// of its own with its part of the top separator, then in each copy the separator and that
+    /// copy's half backward. The halves' rows together are the whole solve's; returned in the
+    /// rows of A.
+    fn split_solve(chol: &Cholesky, b: &[Vec3A]) -> Vec<Vec3A> {
+        let n = b.len();
         let (half_a, half_b) = chol.top_halves().expect("900 rows split");
         let (_, separator) = chol.part_rows(chol.root());
         let rhs: Vec<Vec3A> = chol.perm().iter().map(|&i| b[i as usize]).collect();
@@ -895,17 +913,15 @@ mod tests {
         }
         assert_eq!(copies[0][separator.clone()], copies[1][separator.clone()], "both copies solve the separator alike");
         solved[separator.clone()].copy_from_slice(&copies[0][separator]);
-        let whole = first.unwrap();
+        let mut out = vec![Vec3A::ZERO; n];
         for (k, &i) in chol.perm().iter().enumerate() {
-            let (got, want) = (solved[k], whole[i as usize]);
-            assert!(
-                (got - want).abs().max_element() <= 1e-4 * (1.0 + want.abs().max_element()),
-                "row {k}: {got} vs {want}"
-            );
+            out[i as usize] = solved[k];
         }
+        out
     }
 
-    /// An incomplete factor (`drop`) has fewer entries and is still a symmetric positive
+    /// An incomplete factor (`drop_tolerance`) keeps exactly the entries of the exact factor at
+    /// or above each row's threshold, in both of its copies, and is still a symmetric positive
     /// definite approximation of the inverse: what conjugate gradients need of a preconditioner.
     #[test]
     fn an_incomplete_factor_keeps_the_large_entries_and_stays_symmetric_positive() {
@@ -915,21 +931,47 @@ mod tests {
         let none_dropped = Cholesky::factor(&diagonal, &offsets, &neighbors, &values, &pos, &vec![0.0; n]).unwrap();
         assert_eq!(none_dropped.fill(), exact.fill());
         assert_eq!(none_dropped.row_val, exact.row_val);
-        let incomplete = Cholesky::factor(&diagonal, &offsets, &neighbors, &values, &pos, &vec![0.02; n]).unwrap();
+        // A threshold per row of A, 0.01 to 0.04 (so a threshold read from the wrong row shows).
+        let tolerance: Vec<f64> = (0..n).map(|i| 0.01 * (1 + i % 4) as f64).collect();
+        let incomplete = Cholesky::factor(&diagonal, &offsets, &neighbors, &values, &pos, &tolerance).unwrap();
         let (kept, all) = (incomplete.fill(), exact.fill());
-        assert!(kept < all / 2 && kept >= n, "kept {kept} of {all} entries");
-        // Every entry left is at least the threshold; both copies hold the same entries.
-        for k in 0..n {
-            let entries = incomplete.row_ptr[k] as usize..incomplete.row_ptr[k + 1] as usize;
-            for &v in &incomplete.row_val[entries] {
-                assert!(v.abs() >= 0.02 / incomplete.inv_diag[k] * (1.0 - 1e-6), "row {k}: {v}");
-            }
+        assert!(kept < all / 2, "kept {kept} of {all} entries");
+        // (row, column, value) of every entry of a factor, from its copy by rows and by columns.
+        let by_rows = |chol: &Cholesky| -> Vec<(usize, u32, f32)> {
+            (0..n)
+                .flat_map(|k| (chol.row_ptr[k] as usize..chol.row_ptr[k + 1] as usize).map(move |p| (k, p)))
+                .map(|(k, p)| (k, chol.row_col[p], chol.row_val[p]))
+                .collect()
+        };
+        let by_columns = |chol: &Cholesky| -> Vec<(usize, u32, f32)> {
+            let mut entries: Vec<(usize, u32, f32)> = (0..n)
+                .flat_map(|j| (chol.col_ptr[j] as usize..chol.col_ptr[j + 1] as usize).map(move |p| (j, p)))
+                .map(|(j, p)| (chol.col_row[p] as usize, j as u32, chol.col_val[p]))
+                .collect();
+            entries.sort_by_key(|&(k, j, _)| (k, j));
+            entries
+        };
+        assert_eq!(by_rows(&incomplete), by_columns(&incomplete));
+        // Exactly the exact factor's entries at or above their row's threshold (the same ordering,
+        // so the same rows; L's diagonal entry of row k is 1 / inv_diag[k]).
+        let expected: Vec<(usize, u32, f32)> = by_rows(&exact)
+            .into_iter()
+            .filter(|&(k, _, v)| {
+                let threshold = tolerance[exact.perm[k] as usize] / exact.inv_diag[k] as f64;
+                (v as f64).abs() >= threshold * (1.0 + 1e-6)
+            })
+            .collect();
+        let got = by_rows(&incomplete);
+        assert!(
+            got.len() >= expected.len() && got.len() <= expected.len() + n / 100,
+            "{} vs {}",
+            got.len(),
+            expected.len()
+        );
+        for entry in &expected {
+            assert!(got.contains(entry), "{entry:?} dropped");
         }
-        let mut by_rows: Vec<f32> = incomplete.row_val.clone();
-        let mut by_columns: Vec<f32> = incomplete.col_val.clone();
-        by_rows.sort_by(f32::total_cmp);
-        by_columns.sort_by(f32::total_cmp);
-        assert_eq!(by_rows, by_columns);
+        assert_eq!(incomplete.inv_diag, exact.inv_diag);
         let pool = WorkerPool::new(2).unwrap();
         let apply = |chol: &Cholesky, r: &[Vec3A]| {
             let (mut out, mut work) = (vec![Vec3A::ZERO; n], Vec::new());
@@ -943,6 +985,10 @@ mod tests {
         let (ab, ba_) = (dot(&a, &bb), dot(&b, &ba));
         assert!((ab - ba_).abs() <= 1e-4 * ab.abs().max(ba_.abs()), "{ab} vs {ba_}");
         assert!(dot(&a, &ba) > 0.0 && dot(&b, &bb) > 0.0);
+        // The split solve of a team gives the whole solve's answer.
+        for (got, want) in split_solve(&incomplete, &a).iter().zip(&ba) {
+            assert!((*got - *want).abs().max_element() <= 1e-5 * (1.0 + want.abs().max_element()), "{got} vs {want}");
+        }
         // As a preconditioner: conjugate gradients on A x = A x0 to 1e-6 take a handful of
         // iterations with it (13), the exact factor one, and over a hundred with none (the
         // identity: the grid's smooth modes).

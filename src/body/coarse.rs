@@ -68,9 +68,9 @@
 //!
 //! Measured again with the weight and the incomplete factor ([`COARSE_WEIGHT`] 0.5,
 //! [`DROP_SCALE`] 0.2; ten drops, 8.54 iterations a step with this level): on these aggregates
-//! 6.65 (the factor then has 10,242 entries, against 12,556), but a step was slower, not faster:
-//! the mean over steps of each step's fastest of five alternating runs (one thread, the issue's
-//! drop) 3.45 against 3.20 ms, with a prototype that prolongs in a pass of its own (the
+//! 6.65 (the factor then has 10,242 entries, by chance the vertex count, against 12,556), but
+//! a step was slower, not faster: the mean over steps of each step's fastest of five
+//! alternating runs (one thread, the issue's drop) 3.45 against 3.20 ms, with a prototype that prolongs in a pass of its own (the
 //! restriction and the prolongation stream 26,806 weighted entries each). Built in (the
 //! Galerkin matrix assembled per aggregate, each vertex's weighted correction summed in the
 //! direction pass, a split vertex taking its origin's weights): 6.4 iterations a step on the
@@ -106,8 +106,9 @@ const SPRING_SHARE: f64 = 0.5;
 const COARSE_WEIGHT: f64 = 0.5;
 
 /// The factor of the coarse matrix is incomplete: its entries in the row of an aggregate that
-/// are under `DROP_SCALE √(m / A_c)` of the row's diagonal entry are left out (`m` the
-/// aggregate's mass, `A_c` its diagonal entry of the coarse matrix; see [`Cholesky::factor`]).
+/// are under `DROP_SCALE √(m / A)` of the row's diagonal entry are left out (`m` the aggregate's
+/// mass, `A` its diagonal entry of the coarse matrix before the division by the weight: `m / A`
+/// is the mass's share of it; see [`Cholesky::factor`]).
 /// Most of an exact factor's entries are small, and the CG iterations do not miss them: on the
 /// issue-5 balloon (benches/body_balloon.rs, one thread, CG iterations a step; ten drops 0 to
 /// 25 mm higher than the issue's at h = 1/60 s, six at 1/15 s) the exact factor has 36,620
@@ -122,10 +123,10 @@ const COARSE_WEIGHT: f64 = 0.5;
 const DROP_SCALE: f64 = 0.2;
 
 /// Aggregation passes: each groups the current nodes into a node and its free neighbours, the
-/// leftovers joining a neighbouring group (about 16 to 1 on the balloon: 642 aggregates of its
-/// 10,242 vertices, 17.7k entries in the factor). Measured as above: one pass takes the CG
-/// iterations per step from 46 to 25 on the ground and from 13 to 5 without gravity; two passes
-/// only to 37 and 12 (the coarse matrix then misses too much of the springs' stiffness inside
+/// leftovers joining a neighbouring group (about 9 to 1 on the balloon: 1,167 aggregates of its
+/// 10,242 vertices, 36,620 entries in an exact factor; 642 and 17.7k when first measured).
+/// Measured as above: one pass takes the CG iterations per step from 46 to 25 on the ground and
+/// from 13 to 5 without gravity; two passes only to 37 and 12 (the coarse matrix then misses too much of the springs' stiffness inside
 /// each aggregate); three passes to 49. Smaller aggregates (leftovers grouped among themselves:
 /// 2,121 of them) save under one iteration per step (7.2 to 6.4 with the contact blocks) and cost
 /// more than that in the coarse solve; measured again with the weight and the incomplete factor
@@ -319,8 +320,9 @@ impl CoarseSpace {
         }
         let values: Vec<f64> = graph.weights.iter().map(|&e| -w * e / COARSE_WEIGHT).collect();
         // Per aggregate, the share of its mass in its diagonal (the weight cancels).
-        let drop: Vec<f64> = (0..count).map(|a| DROP_SCALE * (mass[a] / COARSE_WEIGHT / diagonal[a]).sqrt()).collect();
-        let factor = Cholesky::factor(&diagonal, &graph.offsets, &graph.neighbors, &values, &center, &drop)?;
+        let drop_tolerance: Vec<f64> =
+            (0..count).map(|a| DROP_SCALE * (mass[a] / COARSE_WEIGHT / diagonal[a]).sqrt()).collect();
+        let factor = Cholesky::factor(&diagonal, &graph.offsets, &graph.neighbors, &values, &center, &drop_tolerance)?;
         let mut space = Self {
             aggregate: vertex_group,
             factor,
