@@ -302,20 +302,19 @@ impl CoarseSpace {
         }
         let w = SPRING_SHARE
             * ((h * h * model.settings.spring_stiffness) as f64 + (h * model.settings.spring_damping) as f64);
-        let mut diagonal = vec![0.0f64; count];
         let mut mass = vec![0.0f64; count];
         let mut center = vec![Vec3::ZERO; count];
         let mut members = vec![0u32; count];
         for i in 0..n {
             let g = vertex_group[i] as usize;
             mass[g] += model.mass[i] as f64;
-            diagonal[g] += model.mass[i] as f64;
             center[g] += x[i];
             members[g] += 1;
         }
+        let mut diagonal = vec![0.0f64; count];
         for (a, d) in diagonal.iter_mut().enumerate() {
             let edges: f64 = graph.weights[graph.offsets[a] as usize..graph.offsets[a + 1] as usize].iter().sum();
-            *d = (*d + w * edges) / COARSE_WEIGHT;
+            *d = (mass[a] + w * edges) / COARSE_WEIGHT;
             center[a] /= members[a].max(1) as f32;
         }
         let values: Vec<f64> = graph.weights.iter().map(|&e| -w * e / COARSE_WEIGHT).collect();
