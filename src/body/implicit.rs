@@ -36,6 +36,9 @@ use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::{self, Gas};
 use super::obstacles::{Obstacle, resolve, touching};
 #[cfg(target_arch = "x86_64")]
+use super::slice_vertices::slice_vertices_avx2;
+use super::slice_vertices::{RowGas, SliceGas, SliceVertices, VertexConstants, vertex_blocks};
+#[cfg(target_arch = "x86_64")]
 use super::spring_sums::slice_spring_sums_avx2;
 use super::spring_sums::{SliceSums, SpringSums, row_spring_sums};
 use super::spring_terms::{SpringInput, SpringTerms, spring_terms_range};
@@ -432,34 +435,52 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
     let rows = t.rhs.len();
     let slices = SLICES && t.springs.len() == t.couplings.groups.len();
     let mut slice_sums = SliceSums::default();
+    // The per-vertex part of a slice's rows at once where they can (`slice_vertices`).
+    let mut slice_vertices: Option<SliceVertices> = None;
+    let constants = VertexConstants {
+        h: sys.h,
+        gravity: model.settings.gravity,
+        gravity_length: model.settings.gravity.length(),
+        stiffness: model.settings.spring_stiffness,
+    };
     for k in 0..rows {
         let i = t.first + k;
         let lane = i % SLICE;
-        let springs = if slices {
-            if lane == 0 {
-                let groups = t.couplings.groups_of(i);
-                #[cfg(target_arch = "x86_64")]
-                // SAFETY: `SLICES` is set only where the processor has AVX2.
-                unsafe {
-                    slice_sums =
-                        slice_spring_sums_avx2(&mut t.couplings.groups[groups.clone()], &t.springs[groups], terms, i);
-                }
-                #[cfg(not(target_arch = "x86_64"))]
-                unreachable!("{groups:?}");
+        if slices && lane == 0 {
+            let groups = t.couplings.groups_of(i);
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `SLICES` is set only where the processor has AVX2.
+            unsafe {
+                slice_sums =
+                    slice_spring_sums_avx2(&mut t.couplings.groups[groups.clone()], &t.springs[groups], terms, i);
+                slice_vertices = slice_vertex_gas(sys, i, k + SLICE <= rows && force.is_empty(), gas_dot_v)
+                    .map(|gas| slice_vertices_avx2(&slice_sums, &model.mass[i..i + SLICE], constants, gas));
             }
-            slice_sums.lane(lane)
-        } else {
-            row_spring_sums(model.springs.around(i), i, terms, t.couplings.row(i))
+            #[cfg(not(target_arch = "x86_64"))]
+            unreachable!("{groups:?}");
+        }
+        let (rhs, mut inv_diag, magnitude) = match &slice_vertices {
+            Some(vertices) => {
+                let rhs = if model.inv_mass[i] == 0.0 { Vec3A::ZERO } else { vertices.rhs[lane] };
+                (rhs, vertices.inv_diag[lane], vertices.magnitude[lane])
+            }
+            None => {
+                let springs = if slices {
+                    slice_sums.lane(lane)
+                } else {
+                    row_spring_sums(model.springs.around(i), i, terms, t.couplings.row(i))
+                };
+                // The same operations as `external_forces` and `add_gas_forces_parallel`.
+                let f = force.get(i).copied().unwrap_or_else(|| {
+                    let mut f = model.settings.gravity * model.mass[i];
+                    if let Some(frag) = sys.fragment(i) {
+                        f += sys.gradient[i] * sys.gas_pressure[frag] as f32;
+                    }
+                    f
+                });
+                assemble_vertex(sys, springs, i, f, gas_dot_v, constants)
+            }
         };
-        // The same operations as `external_forces` and `add_gas_forces_parallel`.
-        let f = force.get(i).copied().unwrap_or_else(|| {
-            let mut f = model.settings.gravity * model.mass[i];
-            if let Some(frag) = sys.fragment(i) {
-                f += sys.gradient[i] * sys.gas_pressure[frag] as f32;
-            }
-            f
-        });
-        let (rhs, mut inv_diag, magnitude) = assemble_vertex(sys, springs, i, f, gas_dot_v);
         let held = t.contact_held.get(k).copied().unwrap_or(false);
         let hold_limit = HELD_PULL_SHARE * sys.h * magnitude;
         let (dv, filter) =
@@ -486,6 +507,31 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
     }
     run.flush(t.gas);
     (magnitude_squared, rhs_squared, any_contact)
+}
+
+/// Whether the eight rows from `first` can be assembled at once (`whole`: they are all in the
+/// chunk and no external force was gathered; and they share their gas fragment or have none),
+/// and with what gas: `Some(None)` without, `Some(Some(gas))` with.
+fn slice_vertex_gas<'a>(sys: &'a System, first: usize, whole: bool, gas_dot_v: &[f64]) -> Option<Option<SliceGas<'a>>> {
+    if !whole {
+        return None;
+    }
+    let Some(fragment) = sys.vertex_fragment.get(first..first + SLICE) else { return Some(None) };
+    if fragment.iter().any(|&f| f != fragment[0]) {
+        return None;
+    }
+    if fragment[0] == u32::MAX {
+        return Some(None);
+    }
+    let frag = fragment[0] as usize;
+    let coef = sys.gas_coef[frag];
+    Some(Some(SliceGas {
+        gradient: &sys.gradient[first..first + SLICE],
+        pressure: sys.gas_pressure[frag] as f32,
+        pressure_bound: sys.gas_pressure[frag].max(0.0) as f32,
+        coefficient: coef as f32,
+        rhs_scale: (coef * gas_dot_v[frag]) as f32,
+    }))
 }
 
 /// The start of the solve at vertex i: Δv from the warm start `guess` and, if it rests on an
@@ -542,7 +588,8 @@ fn start_vertex(
 }
 
 /// Assembly of one vertex from its springs' sums ([`SpringSums`]): the right side
-/// `h f + h² K v`, its diagonal block (inverted) and its force magnitude.
+/// `h f + h² K v`, its diagonal block (inverted) and its force magnitude ([`vertex_blocks`];
+/// zero right side at a pin).
 #[inline(always)]
 fn assemble_vertex(
     sys: &System,
@@ -550,28 +597,23 @@ fn assemble_vertex(
     i: usize,
     force: Vec3,
     gas_dot_v: &[f64],
+    constants: VertexConstants,
 ) -> (Vec3A, SymmetricBlock, f32) {
     let model = sys.model;
-    let mut rhs = Vec3A::from(force) * sys.h + springs.rhs;
-    // The diagonal block is `(m + Σ alpha) I + Σ w wᵀ`, from the blocks as the coupling slices
-    // store them (bfloat16): the matrix is then exactly that of the rounded springs (see
-    // `coupling_slices`).
-    let mut diag = springs.outer;
-    diag.diagonal += Vec3A::splat(model.mass[i] + springs.alpha);
-    let mut magnitude =
-        model.mass[i] * model.settings.gravity.length() + model.settings.spring_stiffness * springs.extension;
-    if let Some(frag) = sys.fragment(i) {
-        let g = Vec3A::from(sys.gradient[i]);
+    let gas = sys.fragment(i).map(|frag| {
         let coef = sys.gas_coef[frag];
-        diag.add_outer(g, coef as f32);
-        magnitude += g.length() * sys.gas_pressure[frag].max(0.0) as f32;
-        // -h² (P/V) g (g·v)
-        rhs -= g * (coef * gas_dot_v[frag]) as f32;
-    }
+        RowGas {
+            gradient: Vec3A::from(sys.gradient[i]),
+            pressure_bound: sys.gas_pressure[frag].max(0.0) as f32,
+            coefficient: coef as f32,
+            rhs_scale: (coef * gas_dot_v[frag]) as f32,
+        }
+    });
+    let (mut rhs, inv_diag, magnitude) = vertex_blocks(springs, model.mass[i], force, gas, constants);
     if model.inv_mass[i] == 0.0 {
         rhs = Vec3A::ZERO;
     }
-    (rhs, diag.inverse(), magnitude)
+    (rhs, inv_diag, magnitude)
 }
 
 /// A chunk of rows of a product with the system matrix.

@@ -64,11 +64,11 @@ static NO_TERMS: SpringTerms = SpringTerms { rhs: Vec3::ZERO, extension: 0.0, co
 /// The sums of the eight rows `first_row..first_row + 8` of a slice (lane by lane, [`Self::lane`]).
 #[derive(Clone, Copy, Default)]
 pub(crate) struct SliceSums {
-    rhs: [[f32; SLICE]; 3],
-    extension: [f32; SLICE],
-    diagonal: [[f32; SLICE]; 3],
-    off: [[f32; SLICE]; 3],
-    alpha: [f32; SLICE],
+    pub(super) rhs: [[f32; SLICE]; 3],
+    pub(super) extension: [f32; SLICE],
+    pub(super) diagonal: [[f32; SLICE]; 3],
+    pub(super) off: [[f32; SLICE]; 3],
+    pub(super) alpha: [f32; SLICE],
 }
 
 impl SliceSums {

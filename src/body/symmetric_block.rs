@@ -69,6 +69,12 @@ impl SymmetricParts {
 }
 
 impl SymmetricBlock {
+    /// The block of the entries `[xx, yy, zz, xy, yz, zx]`.
+    #[inline(always)]
+    pub fn from_entries(entries: [f32; 6]) -> Self {
+        SymmetricBlock(entries)
+    }
+
     pub fn parts(self) -> SymmetricParts {
         let [xx, yy, zz, xy, yz, zx] = self.0;
         SymmetricParts { diagonal: Vec3A::new(xx, yy, zz), off: Vec3A::new(xy, yz, zx) }

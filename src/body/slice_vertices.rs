@@ -1,0 +1,304 @@
+//! The per-vertex part of the implicit assembly (SPEC 2.2: the right side `h f + h² K v`, the
+//! diagonal block `(m + Σ alpha) I + Σ w wᵀ + h² (P/V) g gᵀ` inverted, the force magnitude) for
+//! the eight rows of a slice at once, from their springs' sums ([`SliceSums`]), where the rows
+//! share their gas fragment (or all have none) and no external force was gathered (wind).
+//!
+//! Row by row this was most of the assembly once the springs' sums went eight rows at a time
+//! (module doc of `spring_sums`): a 3x3 inverse with a division, the gas terms and the right side
+//! in 128-bit registers per row. Here every lane of a 256-bit register is a row, with the same
+//! operations in the same order as `implicit::assemble_vertex` and [`SymmetricParts::inverse`]
+//! (products and sums, no fused multiply-adds), so each row gets the same bits either way
+//! (tested).
+//!
+//! [`SymmetricParts::inverse`]: super::symmetric_block::SymmetricParts::inverse
+
+use glam::{Vec3, Vec3A};
+
+use super::coupling_slices::SLICE;
+use super::spring_sums::{SliceSums, SpringSums};
+use super::symmetric_block::SymmetricBlock;
+
+/// What every row of the system shares.
+#[derive(Clone, Copy)]
+pub(crate) struct VertexConstants {
+    pub h: f32,
+    pub gravity: Vec3,
+    /// `|g|` as `Vec3::length` gives it.
+    pub gravity_length: f32,
+    pub stiffness: f32,
+}
+
+/// The gas fragment that the eight rows share.
+#[derive(Clone, Copy)]
+pub(crate) struct SliceGas<'a> {
+    /// `∂V/∂x` of the eight rows.
+    pub gradient: &'a [Vec3],
+    /// `P` (the force `g P`).
+    pub pressure: f32,
+    /// `max(P, 0)` (the force magnitude).
+    pub pressure_bound: f32,
+    /// `h² P/V` (the diagonal's `g gᵀ` term).
+    pub coefficient: f32,
+    /// `h² P/V Σ g·v` (the right side's `-g (h² P/V) (g·v)` term).
+    pub rhs_scale: f32,
+}
+
+/// The gas fragment of one row.
+#[derive(Clone, Copy)]
+pub(crate) struct RowGas {
+    pub gradient: Vec3A,
+    pub pressure_bound: f32,
+    pub coefficient: f32,
+    pub rhs_scale: f32,
+}
+
+/// One row: its right side `h f + Σ rhs - g (h² P/V Σ g·v)` (before the pins), inverted
+/// diagonal block `(m + Σ alpha) I + Σ w wᵀ + h² (P/V) g gᵀ` and force magnitude
+/// `m |g| + K_s Σ|L - L0| + |∂V/∂x| max(P, 0)`, with the force `force` (gravity, gas pressure
+/// and any external force). The diagonal block is made from the blocks as the coupling slices
+/// store them (bfloat16): the matrix is then exactly that of the rounded springs (see
+/// `coupling_slices`).
+#[inline(always)]
+pub(crate) fn vertex_blocks(
+    springs: SpringSums,
+    mass: f32,
+    force: Vec3,
+    gas: Option<RowGas>,
+    constants: VertexConstants,
+) -> (Vec3A, SymmetricBlock, f32) {
+    let mut rhs = Vec3A::from(force) * constants.h + springs.rhs;
+    let mut diag = springs.outer;
+    diag.diagonal += Vec3A::splat(mass + springs.alpha);
+    let mut magnitude = mass * constants.gravity_length + constants.stiffness * springs.extension;
+    if let Some(gas) = gas {
+        let g = gas.gradient;
+        diag.add_outer(g, gas.coefficient);
+        magnitude += g.length() * gas.pressure_bound;
+        // -h² (P/V) g (g·v)
+        rhs -= g * gas.rhs_scale;
+    }
+    (rhs, diag.inverse(), magnitude)
+}
+
+/// The eight rows' right sides (before the pins), inverted diagonal blocks and force magnitudes.
+pub(crate) struct SliceVertices {
+    pub rhs: [Vec3A; SLICE],
+    pub inv_diag: [SymmetricBlock; SLICE],
+    pub magnitude: [f32; SLICE],
+}
+
+/// The eight rows of `sums` with masses `mass` (eight): for each, what [`vertex_blocks`] gives
+/// it with the force `g m (+ ∂V/∂x P)`.
+///
+/// # Safety
+/// The processor must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) unsafe fn slice_vertices_avx2(
+    sums: &SliceSums,
+    mass: &[f32],
+    constants: VertexConstants,
+    gas: Option<SliceGas>,
+) -> SliceVertices {
+    use std::arch::x86_64::*;
+    assert!(mass.len() == SLICE);
+    let VertexConstants { h, gravity, gravity_length, stiffness } = constants;
+    // (Intrinsics written out: one in a closure does not inherit the target feature and becomes
+    // a call.)
+    // SAFETY (every unaligned load and store below): eight f32 of an array of eight.
+    macro_rules! load {
+        ($a:expr) => {
+            unsafe { _mm256_loadu_ps($a.as_ptr()) }
+        };
+    }
+    let m = load!(mass);
+    // f = g m (+ ∂V/∂x P), as `Vec3` products per axis.
+    let mut fx = _mm256_mul_ps(_mm256_set1_ps(gravity.x), m);
+    let mut fy = _mm256_mul_ps(_mm256_set1_ps(gravity.y), m);
+    let mut fz = _mm256_mul_ps(_mm256_set1_ps(gravity.z), m);
+    // `(m |g|) + (K_s Σ|L - L0|)`.
+    let mut magnitude = _mm256_add_ps(
+        _mm256_mul_ps(m, _mm256_set1_ps(gravity_length)),
+        _mm256_mul_ps(_mm256_set1_ps(stiffness), load!(sums.extension)),
+    );
+    // The diagonal block: `Σ w wᵀ`, then `(m + Σ alpha)` on its diagonal.
+    let diagonal_add = _mm256_add_ps(m, load!(sums.alpha));
+    let mut dxx = _mm256_add_ps(load!(sums.diagonal[0]), diagonal_add);
+    let mut dyy = _mm256_add_ps(load!(sums.diagonal[1]), diagonal_add);
+    let mut dzz = _mm256_add_ps(load!(sums.diagonal[2]), diagonal_add);
+    let (mut dxy, mut dyz, mut dzx) = (load!(sums.off[0]), load!(sums.off[1]), load!(sums.off[2]));
+    // `h f + Σ rhs`.
+    let hh = _mm256_set1_ps(h);
+    let (rx, ry, rz);
+    if let Some(gas) = gas {
+        assert!(gas.gradient.len() == SLICE);
+        let axis = |a: usize| std::array::from_fn::<f32, SLICE, _>(|lane| gas.gradient[lane][a]);
+        let (gx, gy, gz) = (load!(axis(0)), load!(axis(1)), load!(axis(2)));
+        let pressure = _mm256_set1_ps(gas.pressure);
+        fx = _mm256_add_ps(fx, _mm256_mul_ps(gx, pressure));
+        fy = _mm256_add_ps(fy, _mm256_mul_ps(gy, pressure));
+        fz = _mm256_add_ps(fz, _mm256_mul_ps(gz, pressure));
+        // `add_outer(g, h² P/V)`: `sa = g s`, then `sa g` and `sa g.yzx`.
+        let s = _mm256_set1_ps(gas.coefficient);
+        let (sx, sy, sz) = (_mm256_mul_ps(gx, s), _mm256_mul_ps(gy, s), _mm256_mul_ps(gz, s));
+        dxx = _mm256_add_ps(dxx, _mm256_mul_ps(sx, gx));
+        dyy = _mm256_add_ps(dyy, _mm256_mul_ps(sy, gy));
+        dzz = _mm256_add_ps(dzz, _mm256_mul_ps(sz, gz));
+        dxy = _mm256_add_ps(dxy, _mm256_mul_ps(sx, gy));
+        dyz = _mm256_add_ps(dyz, _mm256_mul_ps(sy, gz));
+        dzx = _mm256_add_ps(dzx, _mm256_mul_ps(sz, gx));
+        // `|g|` as `Vec3A::length` gives it, one row at a time.
+        let lengths: [f32; SLICE] = std::array::from_fn(|lane| Vec3A::from(gas.gradient[lane]).length());
+        magnitude = _mm256_add_ps(magnitude, _mm256_mul_ps(load!(lengths), _mm256_set1_ps(gas.pressure_bound)));
+        // Less `g (h² P/V Σ g·v)`.
+        let k = _mm256_set1_ps(gas.rhs_scale);
+        rx = _mm256_sub_ps(_mm256_add_ps(_mm256_mul_ps(fx, hh), load!(sums.rhs[0])), _mm256_mul_ps(gx, k));
+        ry = _mm256_sub_ps(_mm256_add_ps(_mm256_mul_ps(fy, hh), load!(sums.rhs[1])), _mm256_mul_ps(gy, k));
+        rz = _mm256_sub_ps(_mm256_add_ps(_mm256_mul_ps(fz, hh), load!(sums.rhs[2])), _mm256_mul_ps(gz, k));
+    } else {
+        rx = _mm256_add_ps(_mm256_mul_ps(fx, hh), load!(sums.rhs[0]));
+        ry = _mm256_add_ps(_mm256_mul_ps(fy, hh), load!(sums.rhs[1]));
+        rz = _mm256_add_ps(_mm256_mul_ps(fz, hh), load!(sums.rhs[2]));
+    }
+    // The inverse by cofactors (as `SymmetricParts::inverse`).
+    let cxx = _mm256_sub_ps(_mm256_mul_ps(dyy, dzz), _mm256_mul_ps(dyz, dyz));
+    let cyy = _mm256_sub_ps(_mm256_mul_ps(dxx, dzz), _mm256_mul_ps(dzx, dzx));
+    let czz = _mm256_sub_ps(_mm256_mul_ps(dxx, dyy), _mm256_mul_ps(dxy, dxy));
+    let cxy = _mm256_sub_ps(_mm256_mul_ps(dzx, dyz), _mm256_mul_ps(dxy, dzz));
+    let cyz = _mm256_sub_ps(_mm256_mul_ps(dxy, dzx), _mm256_mul_ps(dyz, dxx));
+    let czx = _mm256_sub_ps(_mm256_mul_ps(dxy, dyz), _mm256_mul_ps(dzx, dyy));
+    let det = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dxx, cxx), _mm256_mul_ps(dxy, cxy)), _mm256_mul_ps(dzx, czx));
+    let sign = _mm256_set1_ps(-0.0);
+    let scale = _mm256_add_ps(
+        _mm256_add_ps(_mm256_andnot_ps(sign, dxx), _mm256_andnot_ps(sign, dyy)),
+        _mm256_andnot_ps(sign, dzz),
+    );
+    let threshold = _mm256_mul_ps(_mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(1e-12), scale), scale), scale);
+    // `det.is_finite() && det > threshold` (false for a NaN either way).
+    let finite = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, det), _mm256_set1_ps(f32::INFINITY));
+    let regular = _mm256_and_ps(finite, _mm256_cmp_ps::<_CMP_GT_OQ>(det, threshold));
+    let one = _mm256_set1_ps(1.0);
+    let inv = _mm256_div_ps(one, det);
+    // The singular rows: the inverse of the diagonal (`max` with the floor second, as glam's).
+    let floor = _mm256_set1_ps(f32::MIN_POSITIVE);
+    let zero = _mm256_setzero_ps();
+    let entries = [
+        (_mm256_mul_ps(cxx, inv), _mm256_div_ps(one, _mm256_max_ps(dxx, floor))),
+        (_mm256_mul_ps(cyy, inv), _mm256_div_ps(one, _mm256_max_ps(dyy, floor))),
+        (_mm256_mul_ps(czz, inv), _mm256_div_ps(one, _mm256_max_ps(dzz, floor))),
+        (_mm256_mul_ps(cxy, inv), zero),
+        (_mm256_mul_ps(cyz, inv), zero),
+        (_mm256_mul_ps(czx, inv), zero),
+    ];
+    let mut columns = [[0f32; SLICE]; 6];
+    for (column, (regular_entry, singular_entry)) in columns.iter_mut().zip(entries) {
+        // SAFETY: eight f32.
+        unsafe { _mm256_storeu_ps(column.as_mut_ptr(), _mm256_blendv_ps(singular_entry, regular_entry, regular)) };
+    }
+    let mut rhs = [[0f32; SLICE]; 3];
+    let mut magnitudes = [0f32; SLICE];
+    // SAFETY: eight f32 into each.
+    unsafe {
+        _mm256_storeu_ps(rhs[0].as_mut_ptr(), rx);
+        _mm256_storeu_ps(rhs[1].as_mut_ptr(), ry);
+        _mm256_storeu_ps(rhs[2].as_mut_ptr(), rz);
+        _mm256_storeu_ps(magnitudes.as_mut_ptr(), magnitude);
+    }
+    SliceVertices {
+        rhs: std::array::from_fn(|lane| Vec3A::new(rhs[0][lane], rhs[1][lane], rhs[2][lane])),
+        inv_diag: std::array::from_fn(|lane| SymmetricBlock::from_entries(columns.map(|c| c[lane]))),
+        magnitude: magnitudes,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::symmetric_block::SymmetricParts;
+
+    /// Each lane of the eight-row version is the row-by-row version, bit for bit: with and
+    /// without gas, for positive definite blocks, a singular one (a massless row with no
+    /// springs: the inverse of the diagonal) and an indefinite one.
+    #[test]
+    fn eight_rows_at_once_are_the_rows_one_at_a_time() {
+        #[cfg(target_arch = "x86_64")]
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut unit = crate::body::test_randoms(0x51ce_0f7e_471c_e5a3);
+        let constants = VertexConstants {
+            h: 1.0 / 60.0,
+            gravity: Vec3::new(0.1, -9.81, 0.2),
+            gravity_length: Vec3::new(0.1, -9.81, 0.2).length(),
+            stiffness: 3.0e3,
+        };
+        for round in 0..40 {
+            let mut lanes = [SpringSums::default(); SLICE];
+            let mut mass = [0f32; SLICE];
+            for (lane, sums) in lanes.iter_mut().enumerate() {
+                mass[lane] = 0.01 + unit().abs();
+                sums.rhs = Vec3A::new(unit(), unit(), unit());
+                sums.extension = unit().abs() * 1e-2;
+                sums.alpha = unit().abs() * 50.0;
+                sums.outer = SymmetricParts::default();
+                for _ in 0..6 {
+                    sums.outer.add_outer(Vec3A::new(unit(), unit(), unit()) * 8.0, 1.0);
+                }
+            }
+            // A massless row with no springs, and one whose block is indefinite.
+            lanes[3] = SpringSums::default();
+            mass[3] = 0.0;
+            lanes[5].outer.off = Vec3A::splat(1e4);
+            let mut sums = SliceSums::default();
+            for (lane, s) in lanes.iter().enumerate() {
+                for axis in 0..3 {
+                    sums.rhs[axis][lane] = s.rhs[axis];
+                    sums.diagonal[axis][lane] = s.outer.diagonal[axis];
+                    sums.off[axis][lane] = s.outer.off[axis];
+                }
+                sums.extension[lane] = s.extension;
+                sums.alpha[lane] = s.alpha;
+            }
+            let gradient: Vec<Vec3> = (0..SLICE).map(|_| Vec3::new(unit(), unit(), unit()) * 0.1).collect();
+            let pressure = 2.5e3 * (1.0 + unit());
+            let gas = (round % 2 == 1).then_some(SliceGas {
+                gradient: &gradient,
+                pressure,
+                pressure_bound: pressure.max(0.0),
+                coefficient: 0.4 * unit().abs(),
+                rhs_scale: unit(),
+            });
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: the processor has AVX2 (checked above).
+            let got = unsafe { slice_vertices_avx2(&sums, &mass, constants, gas) };
+            for lane in 0..SLICE {
+                let mut force = constants.gravity * mass[lane];
+                let row_gas = gas.map(|g| {
+                    force += g.gradient[lane] * g.pressure;
+                    RowGas {
+                        gradient: Vec3A::from(g.gradient[lane]),
+                        pressure_bound: g.pressure_bound,
+                        coefficient: g.coefficient,
+                        rhs_scale: g.rhs_scale,
+                    }
+                });
+                let (rhs, inv_diag, magnitude) = vertex_blocks(lanes[lane], mass[lane], force, row_gas, constants);
+                #[cfg(target_arch = "x86_64")]
+                {
+                    let bits = |v: Vec3A| v.to_array().map(f32::to_bits);
+                    assert_eq!(bits(got.rhs[lane]), bits(rhs), "round {round} lane {lane}");
+                    let entries = |b: SymmetricBlock| {
+                        let p = b.parts();
+                        [bits(p.diagonal), bits(p.off)]
+                    };
+                    assert_eq!(entries(got.inv_diag[lane]), entries(inv_diag), "round {round} lane {lane}");
+                    assert_eq!(got.magnitude[lane].to_bits(), magnitude.to_bits(), "round {round} lane {lane}");
+                }
+                if lane == 3 && gas.is_none() {
+                    // The singular row: the inverse of its (zero) diagonal, finite.
+                    assert!(inv_diag.parts().diagonal.is_finite() && inv_diag.parts().off == Vec3A::ZERO);
+                }
+            }
+        }
+    }
+}
