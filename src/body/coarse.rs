@@ -78,6 +78,14 @@
 //! but no faster: the same mean of fastest steps 2.74 against 2.71 ms on one thread, 2.10
 //! against 2.00 on two. Its direction pass took 16% of a step against 9%, its restriction 6%
 //! against 3% (a vertex takes 2.6 entries on average, 1 to 4, in a loop of its own).
+//!
+//! A factored sparse approximate inverse `Zᵀ Z ≈ A_c⁻¹` (FSAI: each row of the lower triangular
+//! Z from the coarse matrix on that row's pattern, so two products with no chain between rows
+//! where the factor's solves go row after row) in place of the factor: on the drop
+//! (one thread; 8.3 CG iterations a step with the factor) Z on the coarse matrix's own pattern
+//! (4,662 entries) took 15.2, on the aggregates two apart (12,345) 12.2, three apart (24,443)
+//! 10.4. The coarse matrix couples the aggregates further than a few apart (its springs
+//! dominate its mass), which only a factor captures with few entries.
 
 use glam::{Vec3, Vec3A};
 
