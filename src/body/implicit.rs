@@ -37,7 +37,7 @@ use super::gas::{self, Gas};
 use super::obstacles::{Obstacle, resolve, touching};
 #[cfg(target_arch = "x86_64")]
 use super::slice_vertices::slice_vertices_avx2;
-use super::slice_vertices::{RowGas, SliceGas, SliceVertices, VertexConstants, vertex_blocks};
+use super::slice_vertices::{GasTerms, RowGas, SliceGas, SliceVertices, VertexConstants, vertex_blocks};
 #[cfg(target_arch = "x86_64")]
 use super::spring_sums::slice_spring_sums_avx2;
 use super::spring_sums::{SliceSums, SpringSums, row_spring_sums};
@@ -344,6 +344,12 @@ impl System<'_> {
     fn fragment(&self, i: usize) -> Option<usize> {
         self.vertex_fragment.get(i).filter(|&&f| f != u32::MAX).map(|&f| f as usize)
     }
+
+    /// The assembly's gas terms of fragment `frag` (`gas_dot_v`: `Σ g·v` per fragment), the same
+    /// for a slice of rows and a row alone.
+    fn gas_terms(&self, frag: usize, gas_dot_v: &[f64]) -> GasTerms {
+        GasTerms::new(self.gas_pressure[frag], self.gas_coef[frag], gas_dot_v[frag])
+    }
 }
 
 /// The normal reaction `λ = n·(A Δv - rhs)_i` an obstacle gave row i in the solve (positive
@@ -422,7 +428,8 @@ unsafe fn assemble_chunk_avx2_fma(input: &AssemblyInput, t: AssemblyTask) -> (f6
 
 /// [`assemble_chunk`]; with `SLICES` the springs' sums of each slice come from
 /// [`slice_spring_sums_avx2`] (only where the processor has AVX2, and the layout's springs are
-/// there), else row by row.
+/// there), and so does the per-vertex part of its rows where they allow
+/// ([`slice_vertices_avx2`]: the same bits), else row by row.
 #[inline(always)]
 fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, bool) {
     let AssemblyInput { sys, terms, force, gas_dot_v, obstacles } = *input;
@@ -436,6 +443,7 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
     let slices = SLICES && t.springs.len() == t.couplings.groups.len();
     let mut slice_sums = SliceSums::default();
     // The per-vertex part of a slice's rows at once where they can (`slice_vertices`).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))]
     let mut slice_vertices: Option<SliceVertices> = None;
     let constants = VertexConstants {
         h: sys.h,
@@ -474,7 +482,7 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
                 let f = force.get(i).copied().unwrap_or_else(|| {
                     let mut f = model.settings.gravity * model.mass[i];
                     if let Some(frag) = sys.fragment(i) {
-                        f += sys.gradient[i] * sys.gas_pressure[frag] as f32;
+                        f += sys.gradient[i] * sys.gas_terms(frag, gas_dot_v).pressure;
                     }
                     f
                 });
@@ -512,11 +520,15 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
 /// Whether the eight rows from `first` can be assembled at once (`whole`: they are all in the
 /// chunk and no external force was gathered; and they share their gas fragment or have none),
 /// and with what gas: `Some(None)` without, `Some(Some(gas))` with.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 fn slice_vertex_gas<'a>(sys: &'a System, first: usize, whole: bool, gas_dot_v: &[f64]) -> Option<Option<SliceGas<'a>>> {
     if !whole {
         return None;
     }
-    let Some(fragment) = sys.vertex_fragment.get(first..first + SLICE) else { return Some(None) };
+    if sys.vertex_fragment.is_empty() {
+        return Some(None);
+    }
+    let fragment = &sys.vertex_fragment[first..first + SLICE];
     if fragment.iter().any(|&f| f != fragment[0]) {
         return None;
     }
@@ -524,14 +536,7 @@ fn slice_vertex_gas<'a>(sys: &'a System, first: usize, whole: bool, gas_dot_v: &
         return Some(None);
     }
     let frag = fragment[0] as usize;
-    let coef = sys.gas_coef[frag];
-    Some(Some(SliceGas {
-        gradient: &sys.gradient[first..first + SLICE],
-        pressure: sys.gas_pressure[frag] as f32,
-        pressure_bound: sys.gas_pressure[frag].max(0.0) as f32,
-        coefficient: coef as f32,
-        rhs_scale: (coef * gas_dot_v[frag]) as f32,
-    }))
+    Some(Some(SliceGas { gradient: &sys.gradient[first..first + SLICE], terms: sys.gas_terms(frag, gas_dot_v) }))
 }
 
 /// The start of the solve at vertex i: Δv from the warm start `guess` and, if it rests on an
@@ -600,15 +605,9 @@ fn assemble_vertex(
     constants: VertexConstants,
 ) -> (Vec3A, SymmetricBlock, f32) {
     let model = sys.model;
-    let gas = sys.fragment(i).map(|frag| {
-        let coef = sys.gas_coef[frag];
-        RowGas {
-            gradient: Vec3A::from(sys.gradient[i]),
-            pressure_bound: sys.gas_pressure[frag].max(0.0) as f32,
-            coefficient: coef as f32,
-            rhs_scale: (coef * gas_dot_v[frag]) as f32,
-        }
-    });
+    let gas = sys
+        .fragment(i)
+        .map(|frag| RowGas { gradient: Vec3A::from(sys.gradient[i]), terms: sys.gas_terms(frag, gas_dot_v) });
     let (mut rhs, inv_diag, magnitude) = vertex_blocks(springs, model.mass[i], force, gas, constants);
     if model.inv_mass[i] == 0.0 {
         rhs = Vec3A::ZERO;

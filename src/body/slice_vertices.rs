@@ -19,6 +19,7 @@ use super::spring_sums::{SliceSums, SpringSums};
 use super::symmetric_block::SymmetricBlock;
 
 /// What every row of the system shares.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 #[derive(Clone, Copy)]
 pub(crate) struct VertexConstants {
     pub h: f32,
@@ -28,11 +29,10 @@ pub(crate) struct VertexConstants {
     pub stiffness: f32,
 }
 
-/// The gas fragment that the eight rows share.
-#[derive(Clone, Copy)]
-pub(crate) struct SliceGas<'a> {
-    /// `∂V/∂x` of the eight rows.
-    pub gradient: &'a [Vec3],
+/// The gas terms of a fragment in f32, as both paths use them: made once ([`GasTerms::new`]),
+/// so that the rows of a slice and a row alone convert the f64 values alike.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct GasTerms {
     /// `P` (the force `g P`).
     pub pressure: f32,
     /// `max(P, 0)` (the force magnitude).
@@ -43,13 +43,33 @@ pub(crate) struct SliceGas<'a> {
     pub rhs_scale: f32,
 }
 
+impl GasTerms {
+    /// From the fragment's pressure `P`, its `h² P/V` and its `Σ g·v`.
+    #[inline(always)]
+    pub fn new(pressure: f64, coefficient: f64, gas_dot_v: f64) -> Self {
+        GasTerms {
+            pressure: pressure as f32,
+            pressure_bound: pressure.max(0.0) as f32,
+            coefficient: coefficient as f32,
+            rhs_scale: (coefficient * gas_dot_v) as f32,
+        }
+    }
+}
+
+/// The gas fragment that the eight rows of a slice share.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+#[derive(Clone, Copy)]
+pub(crate) struct SliceGas<'a> {
+    /// `∂V/∂x` of the eight rows.
+    pub gradient: &'a [Vec3],
+    pub terms: GasTerms,
+}
+
 /// The gas fragment of one row.
 #[derive(Clone, Copy)]
 pub(crate) struct RowGas {
     pub gradient: Vec3A,
-    pub pressure_bound: f32,
-    pub coefficient: f32,
-    pub rhs_scale: f32,
+    pub terms: GasTerms,
 }
 
 /// One row: its right side `h f + Σ rhs - g (h² P/V Σ g·v)` (before the pins), inverted
@@ -72,15 +92,16 @@ pub(crate) fn vertex_blocks(
     let mut magnitude = mass * constants.gravity_length + constants.stiffness * springs.extension;
     if let Some(gas) = gas {
         let g = gas.gradient;
-        diag.add_outer(g, gas.coefficient);
-        magnitude += g.length() * gas.pressure_bound;
+        diag.add_outer(g, gas.terms.coefficient);
+        magnitude += g.length() * gas.terms.pressure_bound;
         // -h² (P/V) g (g·v)
-        rhs -= g * gas.rhs_scale;
+        rhs -= g * gas.terms.rhs_scale;
     }
     (rhs, diag.inverse(), magnitude)
 }
 
 /// The eight rows' right sides (before the pins), inverted diagonal blocks and force magnitudes.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) struct SliceVertices {
     pub rhs: [Vec3A; SLICE],
     pub inv_diag: [SymmetricBlock; SLICE],
@@ -105,7 +126,8 @@ pub(crate) unsafe fn slice_vertices_avx2(
     let VertexConstants { h, gravity, gravity_length, stiffness } = constants;
     // (Intrinsics written out: one in a closure does not inherit the target feature and becomes
     // a call.)
-    // SAFETY (every unaligned load and store below): eight f32 of an array of eight.
+    // SAFETY (every unaligned load below): eight f32 of an array of eight, or of `mass` (its
+    // length asserted above).
     macro_rules! load {
         ($a:expr) => {
             unsafe { _mm256_loadu_ps($a.as_ptr()) }
@@ -134,12 +156,12 @@ pub(crate) unsafe fn slice_vertices_avx2(
         assert!(gas.gradient.len() == SLICE);
         let axis = |a: usize| std::array::from_fn::<f32, SLICE, _>(|lane| gas.gradient[lane][a]);
         let (gx, gy, gz) = (load!(axis(0)), load!(axis(1)), load!(axis(2)));
-        let pressure = _mm256_set1_ps(gas.pressure);
+        let pressure = _mm256_set1_ps(gas.terms.pressure);
         fx = _mm256_add_ps(fx, _mm256_mul_ps(gx, pressure));
         fy = _mm256_add_ps(fy, _mm256_mul_ps(gy, pressure));
         fz = _mm256_add_ps(fz, _mm256_mul_ps(gz, pressure));
         // `add_outer(g, h² P/V)`: `sa = g s`, then `sa g` and `sa g.yzx`.
-        let s = _mm256_set1_ps(gas.coefficient);
+        let s = _mm256_set1_ps(gas.terms.coefficient);
         let (sx, sy, sz) = (_mm256_mul_ps(gx, s), _mm256_mul_ps(gy, s), _mm256_mul_ps(gz, s));
         dxx = _mm256_add_ps(dxx, _mm256_mul_ps(sx, gx));
         dyy = _mm256_add_ps(dyy, _mm256_mul_ps(sy, gy));
@@ -149,9 +171,9 @@ pub(crate) unsafe fn slice_vertices_avx2(
         dzx = _mm256_add_ps(dzx, _mm256_mul_ps(sz, gx));
         // `|g|` as `Vec3A::length` gives it, one row at a time.
         let lengths: [f32; SLICE] = std::array::from_fn(|lane| Vec3A::from(gas.gradient[lane]).length());
-        magnitude = _mm256_add_ps(magnitude, _mm256_mul_ps(load!(lengths), _mm256_set1_ps(gas.pressure_bound)));
+        magnitude = _mm256_add_ps(magnitude, _mm256_mul_ps(load!(lengths), _mm256_set1_ps(gas.terms.pressure_bound)));
         // Less `g (h² P/V Σ g·v)`.
-        let k = _mm256_set1_ps(gas.rhs_scale);
+        let k = _mm256_set1_ps(gas.terms.rhs_scale);
         rx = _mm256_sub_ps(_mm256_add_ps(_mm256_mul_ps(fx, hh), load!(sums.rhs[0])), _mm256_mul_ps(gx, k));
         ry = _mm256_sub_ps(_mm256_add_ps(_mm256_mul_ps(fy, hh), load!(sums.rhs[1])), _mm256_mul_ps(gy, k));
         rz = _mm256_sub_ps(_mm256_add_ps(_mm256_mul_ps(fz, hh), load!(sums.rhs[2])), _mm256_mul_ps(gz, k));
@@ -217,8 +239,10 @@ mod tests {
     use crate::body::symmetric_block::SymmetricParts;
 
     /// Each lane of the eight-row version is the row-by-row version, bit for bit: with and
-    /// without gas, for positive definite blocks, a singular one (a massless row with no
-    /// springs: the inverse of the diagonal) and an indefinite one.
+    /// without gas (of positive and negative pressure), for positive definite blocks and for
+    /// blocks that take the inverse's fallback (the inverse of the diagonal): a massless row with
+    /// no springs (singular), a negative determinant, one that overflows to infinity, and a NaN
+    /// on the diagonal.
     #[test]
     fn eight_rows_at_once_are_the_rows_one_at_a_time() {
         #[cfg(target_arch = "x86_64")]
@@ -232,6 +256,7 @@ mod tests {
             gravity_length: Vec3::new(0.1, -9.81, 0.2).length(),
             stiffness: 3.0e3,
         };
+        let fallback = [3, 5, 6, 7];
         for round in 0..40 {
             let mut lanes = [SpringSums::default(); SLICE];
             let mut mass = [0f32; SLICE];
@@ -245,10 +270,11 @@ mod tests {
                     sums.outer.add_outer(Vec3A::new(unit(), unit(), unit()) * 8.0, 1.0);
                 }
             }
-            // A massless row with no springs, and one whose block is indefinite.
             lanes[3] = SpringSums::default();
             mass[3] = 0.0;
-            lanes[5].outer.off = Vec3A::splat(1e4);
+            lanes[5].outer.off = Vec3A::splat(-1e4);
+            lanes[6].outer.diagonal = Vec3A::splat(1e14);
+            lanes[7].outer.diagonal.y = f32::NAN;
             let mut sums = SliceSums::default();
             for (lane, s) in lanes.iter().enumerate() {
                 for axis in 0..3 {
@@ -260,27 +286,16 @@ mod tests {
                 sums.alpha[lane] = s.alpha;
             }
             let gradient: Vec<Vec3> = (0..SLICE).map(|_| Vec3::new(unit(), unit(), unit()) * 0.1).collect();
-            let pressure = 2.5e3 * (1.0 + unit());
-            let gas = (round % 2 == 1).then_some(SliceGas {
-                gradient: &gradient,
-                pressure,
-                pressure_bound: pressure.max(0.0),
-                coefficient: 0.4 * unit().abs(),
-                rhs_scale: unit(),
-            });
+            let terms = GasTerms::new(2.5e3 * unit() as f64, 0.4 * unit().abs() as f64, unit() as f64);
+            let gas = (round % 2 == 1).then_some(SliceGas { gradient: &gradient, terms });
             #[cfg(target_arch = "x86_64")]
             // SAFETY: the processor has AVX2 (checked above).
             let got = unsafe { slice_vertices_avx2(&sums, &mass, constants, gas) };
             for lane in 0..SLICE {
                 let mut force = constants.gravity * mass[lane];
                 let row_gas = gas.map(|g| {
-                    force += g.gradient[lane] * g.pressure;
-                    RowGas {
-                        gradient: Vec3A::from(g.gradient[lane]),
-                        pressure_bound: g.pressure_bound,
-                        coefficient: g.coefficient,
-                        rhs_scale: g.rhs_scale,
-                    }
+                    force += g.gradient[lane] * g.terms.pressure;
+                    RowGas { gradient: Vec3A::from(g.gradient[lane]), terms: g.terms }
                 });
                 let (rhs, inv_diag, magnitude) = vertex_blocks(lanes[lane], mass[lane], force, row_gas, constants);
                 #[cfg(target_arch = "x86_64")]
@@ -294,9 +309,13 @@ mod tests {
                     assert_eq!(entries(got.inv_diag[lane]), entries(inv_diag), "round {round} lane {lane}");
                     assert_eq!(got.magnitude[lane].to_bits(), magnitude.to_bits(), "round {round} lane {lane}");
                 }
-                if lane == 3 && gas.is_none() {
-                    // The singular row: the inverse of its (zero) diagonal, finite.
-                    assert!(inv_diag.parts().diagonal.is_finite() && inv_diag.parts().off == Vec3A::ZERO);
+                if gas.is_none() {
+                    // Without gas the special lanes take the fallback (the inverse of the
+                    // diagonal: no off-diagonal part, finite), the others the cofactors.
+                    let parts = inv_diag.parts();
+                    let took_fallback = parts.off == Vec3A::ZERO;
+                    assert_eq!(took_fallback, fallback.contains(&lane), "round {round} lane {lane}: {parts:?}");
+                    assert!(!took_fallback || parts.diagonal.is_finite(), "round {round} lane {lane}: {parts:?}");
                 }
             }
         }

@@ -70,6 +70,7 @@ impl SymmetricParts {
 
 impl SymmetricBlock {
     /// The block of the entries `[xx, yy, zz, xy, yz, zx]`.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     #[inline(always)]
     pub fn from_entries(entries: [f32; 6]) -> Self {
         SymmetricBlock(entries)
