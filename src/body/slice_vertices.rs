@@ -17,6 +17,8 @@ use glam::{Vec3, Vec3A};
 use super::coupling_slices::SLICE;
 use super::spring_sums::{SliceSums, SpringSums};
 use super::symmetric_block::SymmetricBlock;
+#[cfg(target_arch = "x86_64")]
+use super::symmetric_block::add_outer_lanes;
 
 /// What every row of the system shares.
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
@@ -145,10 +147,15 @@ pub(crate) unsafe fn slice_vertices_avx2(
     );
     // The diagonal block: `Σ w wᵀ`, then `(m + Σ alpha)` on its diagonal.
     let diagonal_add = _mm256_add_ps(m, load!(sums.alpha));
-    let mut dxx = _mm256_add_ps(load!(sums.diagonal[0]), diagonal_add);
-    let mut dyy = _mm256_add_ps(load!(sums.diagonal[1]), diagonal_add);
-    let mut dzz = _mm256_add_ps(load!(sums.diagonal[2]), diagonal_add);
-    let (mut dxy, mut dyz, mut dzx) = (load!(sums.off[0]), load!(sums.off[1]), load!(sums.off[2]));
+    // xx, yy, zz, xy, yz, zx.
+    let mut block = [
+        _mm256_add_ps(load!(sums.diagonal[0]), diagonal_add),
+        _mm256_add_ps(load!(sums.diagonal[1]), diagonal_add),
+        _mm256_add_ps(load!(sums.diagonal[2]), diagonal_add),
+        load!(sums.off[0]),
+        load!(sums.off[1]),
+        load!(sums.off[2]),
+    ];
     // `h f + Σ rhs`.
     let hh = _mm256_set1_ps(h);
     let (rx, ry, rz);
@@ -162,13 +169,8 @@ pub(crate) unsafe fn slice_vertices_avx2(
         fz = _mm256_add_ps(fz, _mm256_mul_ps(gz, pressure));
         // `add_outer(g, h² P/V)`: `sa = g s`, then `sa g` and `sa g.yzx`.
         let s = _mm256_set1_ps(gas.terms.coefficient);
-        let (sx, sy, sz) = (_mm256_mul_ps(gx, s), _mm256_mul_ps(gy, s), _mm256_mul_ps(gz, s));
-        dxx = _mm256_add_ps(dxx, _mm256_mul_ps(sx, gx));
-        dyy = _mm256_add_ps(dyy, _mm256_mul_ps(sy, gy));
-        dzz = _mm256_add_ps(dzz, _mm256_mul_ps(sz, gz));
-        dxy = _mm256_add_ps(dxy, _mm256_mul_ps(sx, gy));
-        dyz = _mm256_add_ps(dyz, _mm256_mul_ps(sy, gz));
-        dzx = _mm256_add_ps(dzx, _mm256_mul_ps(sz, gx));
+        let scaled = [_mm256_mul_ps(gx, s), _mm256_mul_ps(gy, s), _mm256_mul_ps(gz, s)];
+        add_outer_lanes(&mut block, scaled, [gx, gy, gz]);
         // `|g|` as `Vec3A::length` gives it, one row at a time.
         let lengths: [f32; SLICE] = std::array::from_fn(|lane| Vec3A::from(gas.gradient[lane]).length());
         magnitude = _mm256_add_ps(magnitude, _mm256_mul_ps(load!(lengths), _mm256_set1_ps(gas.terms.pressure_bound)));
@@ -183,6 +185,7 @@ pub(crate) unsafe fn slice_vertices_avx2(
         rz = _mm256_add_ps(_mm256_mul_ps(fz, hh), load!(sums.rhs[2]));
     }
     // The inverse by cofactors (as `SymmetricParts::inverse`).
+    let [dxx, dyy, dzz, dxy, dyz, dzx] = block;
     let cxx = _mm256_sub_ps(_mm256_mul_ps(dyy, dzz), _mm256_mul_ps(dyz, dyz));
     let cyy = _mm256_sub_ps(_mm256_mul_ps(dxx, dzz), _mm256_mul_ps(dzx, dzx));
     let czz = _mm256_sub_ps(_mm256_mul_ps(dxx, dyy), _mm256_mul_ps(dxy, dxy));

@@ -21,6 +21,8 @@ use super::coupling_slices::transpose_rows;
 use super::coupling_slices::{CouplingGroup, PackedCoupling, RowMut, SLICE};
 use super::spring_terms::SpringTerms;
 use super::symmetric_block::SymmetricParts;
+#[cfg(target_arch = "x86_64")]
+use super::symmetric_block::add_outer_lanes;
 
 /// One row's sums over its springs (see the module doc).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -109,7 +111,8 @@ pub(crate) unsafe fn slice_spring_sums_avx2(
     let (low, high) = (_mm256_set1_epi32(0xFFFF), _mm256_set1_epi32(0xFFFF_0000_u32 as i32));
     let zero = _mm256_setzero_ps();
     let (mut rx, mut ry, mut rz, mut extension) = (zero, zero, zero, zero);
-    let (mut dxx, mut dyy, mut dzz, mut dxy, mut dyz, mut dzx, mut alpha) = (zero, zero, zero, zero, zero, zero, zero);
+    // `Σ w wᵀ` (xx, yy, zz, xy, yz, zx) and `Σ alpha`.
+    let (mut outer, mut alpha) = ([zero; 6], zero);
     for (group, lanes) in groups.iter_mut().zip(springs) {
         let records: [*const u8; SLICE] = std::array::from_fn(|lane| {
             let spring = lanes[lane] as usize;
@@ -131,12 +134,7 @@ pub(crate) unsafe fn slice_spring_sums_avx2(
         let wy = _mm256_castsi256_ps(_mm256_and_si256(xy, high));
         let wz = _mm256_castsi256_ps(_mm256_slli_epi32::<16>(za));
         let a = _mm256_castsi256_ps(_mm256_and_si256(za, high));
-        dxx = _mm256_add_ps(dxx, _mm256_mul_ps(wx, wx));
-        dyy = _mm256_add_ps(dyy, _mm256_mul_ps(wy, wy));
-        dzz = _mm256_add_ps(dzz, _mm256_mul_ps(wz, wz));
-        dxy = _mm256_add_ps(dxy, _mm256_mul_ps(wx, wy));
-        dyz = _mm256_add_ps(dyz, _mm256_mul_ps(wy, wz));
-        dzx = _mm256_add_ps(dzx, _mm256_mul_ps(wz, wx));
+        add_outer_lanes(&mut outer, [wx, wy, wz], [wx, wy, wz]);
         alpha = _mm256_add_ps(alpha, a);
         // The halves as eight u16 per axis: packed per 128-bit half (x0-3 y0-3 | x4-7 y4-7),
         // then the quarters reordered (x0-7 | y0-7).
@@ -164,12 +162,12 @@ pub(crate) unsafe fn slice_spring_sums_avx2(
         _mm256_storeu_ps(sums.rhs[0].as_mut_ptr(), rx);
         _mm256_storeu_ps(sums.rhs[1].as_mut_ptr(), ry);
         _mm256_storeu_ps(sums.rhs[2].as_mut_ptr(), rz);
-        _mm256_storeu_ps(sums.diagonal[0].as_mut_ptr(), dxx);
-        _mm256_storeu_ps(sums.diagonal[1].as_mut_ptr(), dyy);
-        _mm256_storeu_ps(sums.diagonal[2].as_mut_ptr(), dzz);
-        _mm256_storeu_ps(sums.off[0].as_mut_ptr(), dxy);
-        _mm256_storeu_ps(sums.off[1].as_mut_ptr(), dyz);
-        _mm256_storeu_ps(sums.off[2].as_mut_ptr(), dzx);
+        _mm256_storeu_ps(sums.diagonal[0].as_mut_ptr(), outer[0]);
+        _mm256_storeu_ps(sums.diagonal[1].as_mut_ptr(), outer[1]);
+        _mm256_storeu_ps(sums.diagonal[2].as_mut_ptr(), outer[2]);
+        _mm256_storeu_ps(sums.off[0].as_mut_ptr(), outer[3]);
+        _mm256_storeu_ps(sums.off[1].as_mut_ptr(), outer[4]);
+        _mm256_storeu_ps(sums.off[2].as_mut_ptr(), outer[5]);
         _mm256_storeu_ps(sums.extension.as_mut_ptr(), extension);
         _mm256_storeu_ps(sums.alpha.as_mut_ptr(), alpha);
     }

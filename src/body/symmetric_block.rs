@@ -116,6 +116,32 @@ impl SymmetricBlock {
     }
 }
 
+/// Adds the products of `a bᵀ` to eight symmetric blocks held lane by lane (`blocks`: xx, yy,
+/// zz, xy, yz, zx, each a register of eight lanes): `a.x b.x`, `a.y b.y` and `a.z b.z` on the
+/// diagonal, `a.x b.y`, `a.y b.z` and `a.z b.x` off it. With `a = s w` and `b = w` these are the
+/// products of [`SymmetricParts::add_outer`] in its order, so each lane gets its bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+pub(crate) fn add_outer_lanes(
+    blocks: &mut [std::arch::x86_64::__m256; 6],
+    [ax, ay, az]: [std::arch::x86_64::__m256; 3],
+    [bx, by, bz]: [std::arch::x86_64::__m256; 3],
+) {
+    use std::arch::x86_64::*;
+    let products = [
+        _mm256_mul_ps(ax, bx),
+        _mm256_mul_ps(ay, by),
+        _mm256_mul_ps(az, bz),
+        _mm256_mul_ps(ax, by),
+        _mm256_mul_ps(ay, bz),
+        _mm256_mul_ps(az, bx),
+    ];
+    for (block, product) in blocks.iter_mut().zip(products) {
+        *block = _mm256_add_ps(*block, product);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
