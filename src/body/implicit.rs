@@ -467,11 +467,8 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
             #[cfg(not(target_arch = "x86_64"))]
             unreachable!("{groups:?}");
         }
-        let (rhs, mut inv_diag, magnitude) = match &slice_vertices {
-            Some(vertices) => {
-                let rhs = if model.inv_mass[i] == 0.0 { Vec3A::ZERO } else { vertices.rhs[lane] };
-                (rhs, vertices.inv_diag[lane], vertices.magnitude[lane])
-            }
+        let (mut rhs, mut inv_diag, magnitude) = match &slice_vertices {
+            Some(vertices) => (vertices.rhs[lane], vertices.inv_diag[lane], vertices.magnitude[lane]),
             None => {
                 let springs = if slices {
                     slice_sums.lane(lane)
@@ -489,6 +486,9 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
                 assemble_vertex(sys, springs, i, f, gas_dot_v, constants)
             }
         };
+        if model.inv_mass[i] == 0.0 {
+            rhs = Vec3A::ZERO;
+        }
         let held = t.contact_held.get(k).copied().unwrap_or(false);
         let hold_limit = HELD_PULL_SHARE * sys.h * magnitude;
         let (dv, filter) =
@@ -593,8 +593,8 @@ fn start_vertex(
 }
 
 /// Assembly of one vertex from its springs' sums ([`SpringSums`]): the right side
-/// `h f + h² K v`, its diagonal block (inverted) and its force magnitude ([`vertex_blocks`];
-/// zero right side at a pin).
+/// `h f + h² K v` (before the pins), its diagonal block (inverted) and its force magnitude
+/// ([`vertex_blocks`]).
 #[inline(always)]
 fn assemble_vertex(
     sys: &System,
@@ -604,15 +604,10 @@ fn assemble_vertex(
     gas_dot_v: &[f64],
     constants: VertexConstants,
 ) -> (Vec3A, SymmetricBlock, f32) {
-    let model = sys.model;
     let gas = sys
         .fragment(i)
         .map(|frag| RowGas { gradient: Vec3A::from(sys.gradient[i]), terms: sys.gas_terms(frag, gas_dot_v) });
-    let (mut rhs, inv_diag, magnitude) = vertex_blocks(springs, model.mass[i], force, gas, constants);
-    if model.inv_mass[i] == 0.0 {
-        rhs = Vec3A::ZERO;
-    }
-    (rhs, inv_diag, magnitude)
+    vertex_blocks(springs, sys.model.mass[i], force, gas, constants)
 }
 
 /// A chunk of rows of a product with the system matrix.
