@@ -40,7 +40,7 @@ use super::slice_vertices::slice_vertices_avx2;
 use super::slice_vertices::{GasTerms, RowGas, SliceGas, SliceVertices, VertexConstants, vertex_blocks};
 #[cfg(target_arch = "x86_64")]
 use super::spring_sums::slice_spring_sums_avx2;
-use super::spring_sums::{SliceSums, SpringSums, row_spring_sums};
+use super::spring_sums::{SliceSums, row_spring_sums};
 use super::spring_terms::{SpringInput, SpringTerms, spring_terms_range};
 use super::symmetric_block::SymmetricBlock;
 use crate::parallel::{SharedSlice, Team, WorkerPool};
@@ -475,15 +475,19 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
                 } else {
                     row_spring_sums(model.springs.around(i), i, terms, t.couplings.row(i))
                 };
+                let gas = sys.fragment(i).map(|frag| RowGas {
+                    gradient: Vec3A::from(sys.gradient[i]),
+                    terms: sys.gas_terms(frag, gas_dot_v),
+                });
                 // The same operations as `external_forces` and `add_gas_forces_parallel`.
                 let f = force.get(i).copied().unwrap_or_else(|| {
                     let mut f = model.settings.gravity * model.mass[i];
-                    if let Some(frag) = sys.fragment(i) {
-                        f += sys.gradient[i] * sys.gas_terms(frag, gas_dot_v).pressure;
+                    if let Some(gas) = gas {
+                        f += sys.gradient[i] * gas.terms.pressure;
                     }
                     f
                 });
-                assemble_vertex(sys, springs, i, f, gas_dot_v, constants)
+                vertex_blocks(springs, model.mass[i], f, gas, constants)
             }
         };
         if model.inv_mass[i] == 0.0 {
@@ -590,24 +594,6 @@ fn start_vertex(
         *inv_diag = restricted.stored();
     }
     (dv.into(), ContactFilter::Slide(normal))
-}
-
-/// Assembly of one vertex from its springs' sums ([`SpringSums`]): the right side
-/// `h f + h² K v` (before the pins), its diagonal block (inverted) and its force magnitude
-/// ([`vertex_blocks`]).
-#[inline(always)]
-fn assemble_vertex(
-    sys: &System,
-    springs: SpringSums,
-    i: usize,
-    force: Vec3,
-    gas_dot_v: &[f64],
-    constants: VertexConstants,
-) -> (Vec3A, SymmetricBlock, f32) {
-    let gas = sys
-        .fragment(i)
-        .map(|frag| RowGas { gradient: Vec3A::from(sys.gradient[i]), terms: sys.gas_terms(frag, gas_dot_v) });
-    vertex_blocks(springs, sys.model.mass[i], force, gas, constants)
 }
 
 /// A chunk of rows of a product with the system matrix.
