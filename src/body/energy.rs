@@ -48,31 +48,80 @@ fn spring_chunk(springs: &Springs, x: &[Vec3], ks: f32, c: usize) -> (f64, f32) 
 }
 
 /// Running sums of [`springs_energy_strain`].
-const ENERGY_LANES: usize = 8;
+pub(crate) const ENERGY_LANES: usize = 8;
 
 /// `Σ K_s e²/2` (J) and `max(0, max e / L0)` of springs with extensions `extension(k)` and rest
 /// lengths `rest` (SPEC 2.5): the energy in eight running f64 sums (spring k in sum k mod 8,
-/// added pairwise at the end) and the strain in eight running maxima. With one running sum
-/// every spring waited for the last one's addition and maximum: on the issue-5 balloon
-/// (benches/body_balloon.rs, six alternating runs each) the mean step went from 1.89 to 1.87 ms
-/// on one thread (medians 1.61 -> 1.56) and from 1.11 to 1.04 ms on two (0.92 -> 0.87), the
-/// same trajectory to the bit. Both measurements of a state, the implicit integrator's
-/// at the end of a substep (from its spring terms) and [`state_energies`] (from the
-/// positions), go through here, so they agree to the bit.
+/// added pairwise at the end) and the strain in eight running maxima ([`SpringEnergyLanes`]).
+/// With one running sum every spring waited for the last one's addition and maximum: on the
+/// issue-5 balloon (benches/body_balloon.rs, six alternating runs each) the mean step went from
+/// 1.89 to 1.87 ms on one thread (medians 1.61 -> 1.56) and from 1.11 to 1.04 ms on two (0.92 ->
+/// 0.87), the same trajectory to the bit. Both measurements of a state, the implicit
+/// integrator's at the end of a substep (its spring terms, eight lanes at a time) and
+/// [`state_energies`] (from the positions), sum in these lanes, so they agree to the bit.
 #[inline]
 pub(crate) fn springs_energy_strain(extension: impl Fn(usize) -> f32, rest: &[f32], ks: f32) -> (f64, f32) {
-    let half_ks = 0.5 * ks as f64;
-    let mut energy = [0.0f64; ENERGY_LANES];
-    let mut strain = [0.0f32; ENERGY_LANES];
-    for (block, rest) in rest.chunks(ENERGY_LANES).enumerate() {
-        for (lane, &rest) in rest.iter().enumerate() {
-            let e = extension(block * ENERGY_LANES + lane);
-            let stretch = e as f64;
-            energy[lane] += half_ks * stretch * stretch;
-            strain[lane] = strain[lane].max(e / rest);
+    let mut lanes = SpringEnergyLanes::new(ks);
+    for (k, &rest) in rest.iter().enumerate() {
+        lanes.add(k % ENERGY_LANES, extension(k), rest);
+    }
+    lanes.finish()
+}
+
+/// The running sums and maxima of [`springs_energy_strain`] (spring k of a chunk in lane
+/// k mod 8), for code that has the extensions at hand one spring or eight at a time.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SpringEnergyLanes {
+    half_ks: f64,
+    energy: [f64; ENERGY_LANES],
+    strain: [f32; ENERGY_LANES],
+}
+
+impl SpringEnergyLanes {
+    pub fn new(ks: f32) -> Self {
+        Self { half_ks: 0.5 * ks as f64, energy: [0.0; ENERGY_LANES], strain: [0.0; ENERGY_LANES] }
+    }
+
+    /// Adds a spring of extension `e` and rest length `rest` to `lane`.
+    #[inline(always)]
+    pub fn add(&mut self, lane: usize, e: f32, rest: f32) {
+        let stretch = e as f64;
+        self.energy[lane] += self.half_ks * stretch * stretch;
+        self.strain[lane] = self.strain[lane].max(e / rest);
+    }
+
+    /// Adds eight springs, one to each lane: the operations of [`SpringEnergyLanes::add`] on
+    /// every lane (no fused multiply-adds; `max` keeps the running maximum when the new
+    /// strain is NaN or equal, as `f32::max` does for a maximum that is never NaN).
+    ///
+    /// # Safety
+    /// The processor must have AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub unsafe fn add_lanes(&mut self, e: std::arch::x86_64::__m256, rest: std::arch::x86_64::__m256) {
+        use std::arch::x86_64::*;
+        let half_ks = _mm256_set1_pd(self.half_ks);
+        // SAFETY: four f64 from and to each half of the energy lanes, eight f32 of the strain.
+        unsafe {
+            for (half, stretch) in
+                [_mm256_cvtps_pd(_mm256_castps256_ps128(e)), _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(e))]
+                    .into_iter()
+                    .enumerate()
+            {
+                let sums = self.energy.as_mut_ptr().add(4 * half);
+                let term = _mm256_mul_pd(_mm256_mul_pd(half_ks, stretch), stretch);
+                _mm256_storeu_pd(sums, _mm256_add_pd(_mm256_loadu_pd(sums), term));
+            }
+            let strain = _mm256_loadu_ps(self.strain.as_ptr());
+            _mm256_storeu_ps(self.strain.as_mut_ptr(), _mm256_max_ps(_mm256_div_ps(e, rest), strain));
         }
     }
-    (pairwise(&energy), strain.iter().fold(0.0f32, |a, &b| a.max(b)))
+
+    /// The energy (J, the lanes added pairwise) and the largest strain (at least 0).
+    pub fn finish(&self) -> (f64, f32) {
+        (pairwise(&self.energy), self.strain.iter().fold(0.0f32, |a, &b| a.max(b)))
+    }
 }
 
 /// Vertices per chunk of [`state_energies`].

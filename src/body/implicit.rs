@@ -31,7 +31,7 @@ use super::coupling_slices::load_points_transposed;
 use super::coupling_slices::{
     CouplingGroup, CouplingSlices, RowTerms, SLICE, SliceRowsMut, group_range, product_slices, row_coupling_sum,
 };
-use super::energy::{self, springs_energy_strain};
+use super::energy::{self, SpringEnergyLanes};
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::{self, Gas};
 use super::obstacles::{Obstacle, resolve, touching};
@@ -1578,14 +1578,14 @@ pub(crate) fn substep(
                     let first = range.start;
                     // SAFETY: this chunk of the terms, written by this member alone.
                     let terms = unsafe { shared.terms.part(range.clone()) };
-                    spring_terms_range(&spring_input, first, terms);
-                    if energies {
-                        // The extensions of `springs::spring_extension` (the same bits), summed as
-                        // `energy::state_energies` sums them.
-                        let sums = springs_energy_strain(|k| terms[k].extension, &model.springs.rest[range], ks);
+                    // With `energies`, the extensions of `springs::spring_extension` (the same
+                    // bits) summed as `energy::state_energies` sums them.
+                    let mut lanes = energies.then(|| SpringEnergyLanes::new(ks));
+                    spring_terms_range(&spring_input, first, terms, lanes.as_mut());
+                    if let Some(lanes) = lanes {
                         // SAFETY: this chunk's slot (the spring chunks are the energy's), written
                         // by this member alone.
-                        unsafe { end_springs.part(c..c + 1)[0] = sums };
+                        unsafe { end_springs.part(c..c + 1)[0] = lanes.finish() };
                     }
                     return;
                 }

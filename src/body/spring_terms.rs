@@ -7,6 +7,7 @@ use glam::{Vec3, Vec3A};
 #[cfg(target_arch = "x86_64")]
 use super::coupling_slices::transpose_rows;
 use super::coupling_slices::{Coupling, PackedCoupling};
+use super::energy::{ENERGY_LANES, SpringEnergyLanes};
 #[cfg(target_arch = "x86_64")]
 use super::springs::MIN_LENGTH_RATIO;
 use super::springs::{is_degenerate, spring_block_coefficients};
@@ -77,15 +78,29 @@ pub(crate) fn spring_terms(input: &SpringInput, k: usize) -> SpringTerms {
 /// [`spring_terms`], so the results are the same bits either way (tested). On the issue-5
 /// balloon this pass (30,720 springs) took about 11 ns per spring one at a time, most of it in
 /// the two square roots and the division, which eight lanes share.
-pub(crate) fn spring_terms_range(input: &SpringInput, first: usize, out: &mut [SpringTerms]) {
+///
+/// With `energy`, each spring's extension is also added to its lanes (spring `first + k` in
+/// lane k mod 8, as `energy::springs_energy_strain` sums a chunk from `first`), eight at a
+/// time while they are in registers. As a pass of its own over the terms, one spring at a time
+/// (a division and a maximum each), it took 1.6-1.9% of a one-thread profile of the issue-5
+/// balloon's drop, now about 0.4% (the terms' share grew by that), with the same bits.
+pub(crate) fn spring_terms_range(
+    input: &SpringInput,
+    first: usize,
+    out: &mut [SpringTerms],
+    mut energy: Option<&mut SpringEnergyLanes>,
+) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2 (checked just above).
-        unsafe { spring_terms_avx2(input, first, out) };
+        unsafe { spring_terms_avx2(input, first, out, energy) };
         return;
     }
     for (k, t) in out.iter_mut().enumerate() {
         *t = spring_terms(input, first + k);
+        if let Some(lanes) = energy.as_deref_mut() {
+            lanes.add(k % ENERGY_LANES, t.extension, input.rest[first + k]);
+        }
     }
 }
 
@@ -142,7 +157,12 @@ unsafe fn bf16_lanes(v: std::arch::x86_64::__m256) -> std::arch::x86_64::__m256i
 /// The processor must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn spring_terms_avx2(input: &SpringInput, first: usize, out: &mut [SpringTerms]) {
+unsafe fn spring_terms_avx2(
+    input: &SpringInput,
+    first: usize,
+    out: &mut [SpringTerms],
+    mut energy: Option<&mut SpringEnergyLanes>,
+) {
     use std::arch::x86_64::*;
     let (ks, kd, h) = (input.stiffness, input.damping, input.h);
     let h2 = h * h;
@@ -174,6 +194,9 @@ unsafe fn spring_terms_avx2(input: &SpringInput, first: usize, out: &mut [Spring
             let end = (k + 8).min(out.len());
             for (m, t) in out[k..end].iter_mut().enumerate() {
                 *t = spring_terms(input, s + m);
+                if let Some(lanes) = energy.as_deref_mut() {
+                    lanes.add((k + m) % ENERGY_LANES, t.extension, input.rest[s + m]);
+                }
             }
             k = end;
             continue;
@@ -215,6 +238,11 @@ unsafe fn spring_terms_avx2(input: &SpringInput, first: usize, out: &mut [Spring
         let keep = |v: __m256| _mm256_andnot_ps(degenerate, v);
         let (rx, ry, rz, extension) =
             (keep(rhs(wx, ux)), keep(rhs(wy, uy)), keep(rhs(wz, uz)), _mm256_sub_ps(len, rest));
+        if let Some(lanes) = energy.as_deref_mut() {
+            // SAFETY: AVX2 (this function's contract); k is a multiple of eight here, so lane l
+            // holds spring first + k + l of lane l.
+            unsafe { lanes.add_lanes(extension, rest) };
+        }
         // SAFETY: AVX2 (this function's contract).
         let [cx, cy, cz, ca] = unsafe {
             [
@@ -341,7 +369,21 @@ mod tests {
         assert!(expected.iter().filter(|t| t.coupling.unpacked().w().length() > 0.0).count() > 150);
         for first in [0, 3, 8] {
             let mut out = vec![SpringTerms::default(); ends.len() - first];
-            spring_terms_range(&input, first, &mut out);
+            spring_terms_range(&input, first, &mut out, None);
+            // With the energy lanes: the same terms, and the energy and strain (to the bit) of
+            // `springs_energy_strain` over the springs from `first`.
+            let mut with_energy = vec![SpringTerms::default(); ends.len() - first];
+            let mut lanes = SpringEnergyLanes::new(input.stiffness);
+            spring_terms_range(&input, first, &mut with_energy, Some(&mut lanes));
+            assert_eq!(with_energy, out);
+            let (energy, strain) = lanes.finish();
+            let (want_energy, want_strain) = crate::body::energy::springs_energy_strain(
+                |k| expected[first + k].extension,
+                &rest[first..],
+                input.stiffness,
+            );
+            assert_eq!((energy.to_bits(), strain.to_bits()), (want_energy.to_bits(), want_strain.to_bits()));
+            assert!(energy > 0.0 && strain > 0.0, "first {first}: {energy} J, strain {strain}");
             for (k, (got, want)) in out.iter().zip(&expected[first..]).enumerate() {
                 let bits = |t: &SpringTerms| {
                     let mut all = Vec::new();
