@@ -81,6 +81,11 @@ fn residual_row(
 /// `contact` too or is empty). The sums take each row's products in f64, the rows of even and
 /// of odd index apart, added at the end: the result depends only on the chunk's rows.
 ///
+/// Both rows' blocks apply in one register ([`SymmetricBlock::apply_pair`], the same bits as
+/// one row at a time), and the contacts are looked at only where a row touches: on the issue-5
+/// balloon (one thread, two profiles each way) this pass went from 0.41-0.50 to 0.353-0.355 of
+/// the product's time, with the same CG iterations step for step.
+///
 /// # Safety
 /// The processor must have AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
@@ -114,13 +119,12 @@ unsafe fn residual_rows_avx2(
             );
             let ri = _mm256_and_ps(_mm256_fnmadd_ps(_mm256_loadu_ps(app.add(at)), a, _mm256_loadu_ps(rp.add(at))), xyz);
             _mm256_storeu_ps(rp.add(at), ri);
-            let (r0, r1) = (Vec3A::from(_mm256_castps256_ps128(ri)), Vec3A::from(_mm256_extractf128_ps::<1>(ri)));
-            let (mut z0, mut z1) = (inv_diag[k].apply(r0), inv_diag[k + 1].apply(r1));
-            if !contact.is_empty() {
-                z0 = contact.apply(k, z0);
-                z1 = contact.apply(k + 1, z1);
+            let pair: &[SymmetricBlock; 2] = inv_diag[k..k + 2].try_into().expect("two rows");
+            let mut zi = SymmetricBlock::apply_pair(pair, ri);
+            if !contact.is_empty() && (contact.slot[k] != u32::MAX || contact.slot[k + 1] != u32::MAX) {
+                let (z0, z1) = (Vec3A::from(_mm256_castps256_ps128(zi)), Vec3A::from(_mm256_extractf128_ps::<1>(zi)));
+                zi = _mm256_set_m128(contact.apply(k + 1, z1).into(), contact.apply(k, z0).into());
             }
-            let zi = _mm256_set_m128(z1.into(), z0.into());
             _mm256_storeu_ps(zp.add(at), zi);
             (ri, zi)
         };
