@@ -29,7 +29,8 @@ use super::coarse::{CoarseSpace, CoarseView};
 #[cfg(target_arch = "x86_64")]
 use super::coupling_slices::load_points_transposed;
 use super::coupling_slices::{
-    CouplingGroup, CouplingSlices, RowTerms, SLICE, SliceRowsMut, group_range, product_slices, row_coupling_sum,
+    CheckedCouplings, CouplingGroup, CouplingSlices, RowTerms, SLICE, SliceRowsMut, group_range, product_slices,
+    row_coupling_sum,
 };
 use super::energy::{self, SpringEnergyLanes};
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
@@ -610,7 +611,7 @@ struct ProductTask<'a> {
 fn product_rows(
     sys: &System,
     contact: ContactRows,
-    (offsets, groups): (&[u32], &[CouplingGroup]),
+    couplings: CheckedCouplings,
     input: &[Vec3A],
     gas_scale: &[f32],
     task: &mut ProductTask,
@@ -626,7 +627,7 @@ fn product_rows(
         contact_slot: contact.slot,
         contact_normal: contact.normal,
     };
-    task.dot = product_slices(offsets, groups, input, rows, &terms, task.out);
+    task.dot = product_slices(couplings, input, rows, &terms, task.out);
 }
 
 /// `Σ g·value(i)` over the vertices `rows`, per gas fragment (`vertex_fragment`, `gradient`),
@@ -939,7 +940,7 @@ unsafe fn direction_rows_avx2<const COARSE: bool, const CONTACT: bool, const GAS
 struct SolveInput<'a> {
     sys: &'a System<'a>,
     contact: ContactRows<'a>,
-    coupling: (&'a [u32], &'a [CouplingGroup]),
+    coupling: CheckedCouplings<'a>,
     rhs: &'a [Vec3A],
     inv_diag: &'a [SymmetricBlock],
     any_contact: bool,
@@ -1727,7 +1728,9 @@ pub(crate) fn substep(
                         } else {
                             ContactRows::default()
                         },
-                        coupling: (shared.coupling_offsets, shared.couplings.whole()),
+                        // (Checked by each member: about 61k other ends on the issue-5
+                        // balloon, a few microseconds once per substep.)
+                        coupling: CheckedCouplings::new(shared.coupling_offsets, shared.couplings.whole(), n),
                         rhs: shared.rhs.whole(),
                         inv_diag: shared.inv_diag.whole(),
                         any_contact,
