@@ -8,10 +8,11 @@
 //!
 //! A loop of many short passes (the iterations of a solver) runs as one parallel region on a
 //! [`Team`] of the pool's threads ([`WorkerPool::team`]): the members claim fixed chunks
-//! ([`Team::claim`]), meet at spin barriers ([`Team::barrier`]) and share the arrays of the
-//! passes through [`SharedSlice`] (each member writes only the chunks it claimed in a pass), so a
-//! pass costs a barrier (well under a microsecond on idle cores) instead of a fork and join
-//! (tens of microseconds when a worker has to be woken).
+//! ([`Team::claim`]), meet at barriers ([`Team::barrier`]: spinning, then asleep) and share the
+//! arrays of the passes through [`SharedSlice`] (each member writes only the chunks it claimed in
+//! a pass), so a pass costs a barrier (well under a microsecond on idle cores) instead of a fork
+//! and join (tens of microseconds when a worker has to be woken). When another process holds a
+//! core, a [`TeamSizer`] gives the runs of a team one member for a while.
 
 use std::marker::PhantomData;
 use std::ops::Range;
@@ -171,24 +172,41 @@ impl WorkerPool {
     /// one member makes the others' barriers panic too (nobody waits forever), and comes back out
     /// of this call.
     pub fn team<R: Send>(&self, f: impl Fn(&Team) -> R + Sync) -> R {
+        self.team_of(self.threads, f).0
+    }
+
+    /// [`WorkerPool::team`] with `members` members (at least one, at most the pool's threads;
+    /// one runs on the caller's thread alone), and what its barriers saw ([`TeamStats`]).
+    pub fn team_of<R: Send>(&self, members: usize, f: impl Fn(&Team) -> R + Sync) -> (R, TeamStats) {
         #[cfg(feature = "parallel")]
-        if let Some(pool) = &self.pool {
-            let sync = TeamSync::new(self.threads);
+        if let (Some(pool), true) = (&self.pool, members > 1 && self.threads > 1) {
+            let members = members.min(self.threads);
+            let sync = TeamSync::new(members);
             let run = |index: usize| {
-                let member = Team { index, size: self.threads, sync: &sync, passes: std::cell::Cell::new(0) };
+                let member = Team { index, size: members, sync: &sync, passes: std::cell::Cell::new(0) };
                 match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&member))) {
                     Ok(result) => result,
                     Err(panic) => {
-                        sync.poisoned.store(true, Ordering::Release);
+                        sync.poisoned.store(true, Ordering::SeqCst);
+                        sync.wake_sleepers();
                         std::panic::resume_unwind(panic)
                     }
                 }
             };
-            let mut results = pool.install(|| pool.broadcast(|ctx| run(ctx.index())));
-            return results.swap_remove(0);
+            // Threads past the team's members take no part.
+            let mut results = pool.install(|| pool.broadcast(|ctx| (ctx.index() < members).then(|| run(ctx.index()))));
+            let result = results.swap_remove(0).expect("member 0 runs");
+            let stats = TeamStats {
+                members,
+                barriers: sync.barriers.load(Ordering::Relaxed),
+                sleeps: sync.sleeps.load(Ordering::Relaxed),
+            };
+            return (result, stats);
         }
+        let _ = members;
         let sync = TeamSync::new(1);
-        f(&Team { index: 0, size: 1, sync: &sync, passes: std::cell::Cell::new(0) })
+        let result = f(&Team { index: 0, size: 1, sync: &sync, passes: std::cell::Cell::new(0) });
+        (result, TeamStats { members: 1, ..TeamStats::default() })
     }
 
     /// Heap bytes attributed to the pool (its threads' stacks are not counted).
@@ -201,13 +219,75 @@ impl WorkerPool {
     }
 }
 
-/// The meeting point of a team: a sense-reversing barrier (a counter and a generation), and
-/// per member the next unclaimed item of its share in the current pass ([`Team::claim`]).
+/// What a team's barriers saw ([`WorkerPool::team_of`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TeamStats {
+    /// Members in the team.
+    pub members: usize,
+    /// Barriers passed (by all members).
+    pub barriers: usize,
+    /// Times a member fell asleep in a barrier: another member was still not there after
+    /// [`SPIN_BEFORE_SLEEP`], mostly because its thread was off its core.
+    pub sleeps: usize,
+}
+
+/// Chooses the members of a sequence of team runs (the steps of a simulation): all the pool's
+/// threads, unless a run's members slept in more than a quarter of its barriers. Then another
+/// process holds one of the cores, and a team that meets there waits for it again and again:
+/// the issue-5 balloon with a busy loop on the second of two cores took 8.7 ms a step with two
+/// members spinning at each barrier, 5.5 ms with them sleeping there, and 3.4 ms with one
+/// member. The next 4 runs then get one member, and the one after probes with all again; each
+/// probe that finds the core still busy doubles the wait (up to 64 runs). Results do not depend
+/// on the members (see [`Team::claim`]), so only the time changes.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TeamSizer {
+    alone_left: u32,
+    backoff: u32,
+}
+
+impl TeamSizer {
+    const FIRST_BACKOFF: u32 = 4;
+    const LONGEST_BACKOFF: u32 = 64;
+
+    /// The members of the next run, with `threads` available.
+    pub fn members(&mut self, threads: usize) -> usize {
+        if self.alone_left > 0 {
+            self.alone_left -= 1;
+            1
+        } else {
+            threads
+        }
+    }
+
+    /// What the last run's barriers saw.
+    pub fn record(&mut self, stats: TeamStats) {
+        if stats.members < 2 {
+            return;
+        }
+        if 4 * stats.sleeps > stats.barriers {
+            self.backoff = (2 * self.backoff).clamp(Self::FIRST_BACKOFF, Self::LONGEST_BACKOFF);
+            self.alone_left = self.backoff;
+        } else {
+            self.backoff = 0;
+        }
+    }
+}
+
+/// The meeting point of a team: a sense-reversing barrier (a counter and a generation, and a
+/// condition variable for members that stopped spinning), and per member the next unclaimed
+/// item of its share in the current pass ([`Team::claim`]).
 struct TeamSync {
     size: usize,
     arrived: Padded<AtomicUsize>,
     generation: Padded<AtomicUsize>,
     poisoned: AtomicBool,
+    /// Members asleep in [`Team::barrier`] (the last to arrive wakes them only if there are).
+    sleepers: Padded<AtomicUsize>,
+    /// Barriers passed, and the times a member fell asleep in one ([`TeamStats`]).
+    barriers: AtomicUsize,
+    sleeps: AtomicUsize,
+    park: std::sync::Mutex<()>,
+    wake: std::sync::Condvar,
     /// Per member: `pass << 32 | next item`.
     claims: Vec<Padded<AtomicU64>>,
 }
@@ -223,15 +303,36 @@ impl TeamSync {
             arrived: Padded(AtomicUsize::new(0)),
             generation: Padded(AtomicUsize::new(0)),
             poisoned: AtomicBool::new(false),
+            sleepers: Padded(AtomicUsize::new(0)),
+            barriers: AtomicUsize::new(0),
+            sleeps: AtomicUsize::new(0),
+            park: std::sync::Mutex::new(()),
+            wake: std::sync::Condvar::new(),
             claims: (0..size).map(|_| Padded(AtomicU64::new(0))).collect(),
+        }
+    }
+
+    /// Wakes the members asleep in a barrier, if any (after the generation moved on or the
+    /// team was poisoned: both are stored before this, sequentially consistent, and a sleeper
+    /// counts itself before it looks at them, so one of the two sees the other).
+    fn wake_sleepers(&self) {
+        if self.sleepers.0.load(Ordering::SeqCst) > 0 {
+            let _guard = self.park.lock().unwrap_or_else(|e| e.into_inner());
+            self.wake.notify_all();
         }
     }
 }
 
-/// Spins before a waiting member starts yielding its core: a barrier of a solver iteration is
-/// usually passed within microseconds, but a member whose thread was descheduled (a shared
-/// machine, or more members than cores) must not be starved by the others' spinning.
-const SPINS_BEFORE_YIELD: u32 = 1 << 8;
+/// How long a waiting member spins before it sleeps: a barrier of a solver iteration is usually
+/// passed within microseconds, but when another member's thread was descheduled (a shared
+/// machine, or more members than cores) the waiting member must give its core away, so that
+/// the scheduler can move the descheduled member there. Yielding the core instead kept it busy
+/// (nothing else is queued on it) while the descheduled member waited for its own.
+const SPIN_BEFORE_SLEEP: std::time::Duration = std::time::Duration::from_micros(20);
+
+/// The longest a sleeping member waits before it looks again (a safety net: the last member
+/// to arrive wakes the sleepers).
+const SLEEP_LIMIT: std::time::Duration = std::time::Duration::from_millis(2);
 
 /// One member of a team running a closure on every thread of a pool ([`WorkerPool::team`]).
 pub struct Team<'a> {
@@ -295,8 +396,9 @@ impl Team<'_> {
     }
 
     /// Waits until every member has arrived here. Writes made before the barrier by any member
-    /// are seen after it by all. Spins, then yields, never sleeps; panics if another member
-    /// panicked. (Not inlined: profiles then show the time spent waiting.)
+    /// are seen after it by all. Spins for [`SPIN_BEFORE_SLEEP`], then sleeps until the last
+    /// member arrives; panics if another member panicked. (Not inlined: profiles then show the
+    /// time spent waiting.)
     #[inline(never)]
     pub fn barrier(&self) {
         let sync = self.sync;
@@ -306,19 +408,35 @@ impl Team<'_> {
         let generation = sync.generation.0.load(Ordering::Acquire);
         if sync.arrived.0.fetch_add(1, Ordering::AcqRel) + 1 == sync.size {
             sync.arrived.0.store(0, Ordering::Relaxed);
-            sync.generation.0.store(generation.wrapping_add(1), Ordering::Release);
+            sync.generation.0.store(generation.wrapping_add(1), Ordering::SeqCst);
+            sync.barriers.fetch_add(1, Ordering::Relaxed);
+            sync.wake_sleepers();
             return;
         }
-        let mut spins = 0u32;
-        while sync.generation.0.load(Ordering::Acquire) == generation {
-            if sync.poisoned.load(Ordering::Relaxed) {
+        let passed = || sync.generation.0.load(Ordering::SeqCst) != generation;
+        let poisoned = || {
+            if sync.poisoned.load(Ordering::SeqCst) {
                 panic!("another member of the worker team panicked");
             }
-            if spins < SPINS_BEFORE_YIELD {
-                std::hint::spin_loop();
-                spins += 1;
-            } else {
-                std::thread::yield_now();
+        };
+        let start = std::time::Instant::now();
+        let mut spins = 0u32;
+        while !passed() {
+            poisoned();
+            std::hint::spin_loop();
+            spins = spins.wrapping_add(1);
+            // (The clock read once every 64 spins.)
+            if spins % 64 == 0 && start.elapsed() >= SPIN_BEFORE_SLEEP {
+                let mut guard = sync.park.lock().unwrap_or_else(|e| e.into_inner());
+                sync.sleepers.0.fetch_add(1, Ordering::SeqCst);
+                sync.sleeps.fetch_add(1, Ordering::Relaxed);
+                while !passed() && !sync.poisoned.load(Ordering::SeqCst) {
+                    guard = sync.wake.wait_timeout(guard, SLEEP_LIMIT).unwrap_or_else(|e| e.into_inner()).0;
+                }
+                sync.sleepers.0.fetch_sub(1, Ordering::SeqCst);
+                drop(guard);
+                poisoned();
+                return;
             }
         }
     }
@@ -493,6 +611,79 @@ mod tests {
             #[cfg(feature = "parallel")]
             assert_eq!(many.2, threads as usize, "every member ran");
         }
+    }
+
+    /// A member that arrives late (its thread busy for milliseconds) finds the other asleep
+    /// in the barrier and wakes it; the stats count the barriers and that sleep. A team of one
+    /// member on a pool of two runs alone, with the same result.
+    #[test]
+    fn a_late_member_wakes_the_one_asleep_in_the_barrier() {
+        let pool = WorkerPool::new(2).unwrap();
+        let run = |members| {
+            pool.team_of(members, |team| {
+                let mut seen = Vec::new();
+                for round in 0..3 {
+                    if team.index() == 1 && round == 1 {
+                        std::thread::sleep(std::time::Duration::from_millis(5));
+                    }
+                    team.barrier();
+                    seen.push((round, team.size()));
+                }
+                seen
+            })
+        };
+        let (seen, stats) = run(2);
+        assert_eq!(seen, [(0, 2), (1, 2), (2, 2)]);
+        assert_eq!((stats.members, stats.barriers), (2, 3));
+        assert!(stats.sleeps >= 1, "{stats:?}");
+        let (alone, stats) = run(1);
+        assert_eq!(alone, [(0, 1), (1, 1), (2, 1)]);
+        assert_eq!(stats, TeamStats { members: 1, barriers: 0, sleeps: 0 });
+    }
+
+    /// A member asleep in a barrier is woken by another member's panic, and panics too.
+    #[test]
+    fn a_panic_wakes_a_member_asleep_in_a_barrier() {
+        let pool = WorkerPool::new(2).unwrap();
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            pool.team(|team| {
+                if team.index() == 1 {
+                    std::thread::sleep(std::time::Duration::from_millis(5));
+                    panic!("member");
+                }
+                team.barrier();
+            })
+        }));
+        assert!(result.is_err());
+    }
+
+    /// One member for 4 runs after a run whose members slept in more than a quarter of its
+    /// barriers, then a probe with all; each contended probe doubles the wait (to 64 runs), and
+    /// a quiet run ends it.
+    #[test]
+    fn a_contended_team_runs_alone_for_a_while() {
+        let busy = TeamStats { members: 2, barriers: 40, sleeps: 11 };
+        let quiet = TeamStats { members: 2, barriers: 40, sleeps: 10 };
+        let mut sizer = TeamSizer::default();
+        assert_eq!(sizer.members(2), 2);
+        sizer.record(quiet);
+        assert_eq!(sizer.members(2), 2);
+        let mut alone_runs = Vec::new();
+        for _ in 0..6 {
+            sizer.record(busy);
+            let mut alone = 0;
+            while sizer.members(2) == 1 {
+                // Runs alone report no barriers and change nothing.
+                sizer.record(TeamStats { members: 1, ..TeamStats::default() });
+                alone += 1;
+            }
+            alone_runs.push(alone);
+        }
+        assert_eq!(alone_runs, [4, 8, 16, 32, 64, 64]);
+        sizer.record(quiet);
+        assert_eq!(sizer.members(2), 2);
+        sizer.record(busy);
+        assert_eq!(sizer.members(2), 1, "the wait starts again at 4 runs");
     }
 
     #[test]

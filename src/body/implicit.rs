@@ -44,7 +44,7 @@ use super::spring_sums::slice_spring_sums_avx2;
 use super::spring_sums::{SliceSums, row_spring_sums};
 use super::spring_terms::{SpringInput, SpringTerms, spring_terms_range};
 use super::symmetric_block::SymmetricBlock;
-use crate::parallel::{SharedSlice, Team, WorkerPool};
+use crate::parallel::{SharedSlice, Team, TeamSizer, WorkerPool};
 
 /// How a vertex in contact with an obstacle is constrained inside the solve (Baraff and Witkin
 /// 1998, modified PCG): its constrained velocity components are filtered out of the residual and
@@ -98,6 +98,8 @@ pub(crate) struct ImplicitScratch {
     /// External and gas forces at the start of the substep (the springs are added per vertex);
     /// only with wind: otherwise the assembly computes gravity and pressure per vertex.
     pub force: Vec<Vec3>,
+    /// The members of each substep's team: one while another process holds a core.
+    team_sizer: TeamSizer,
     pub gradient: Vec<Vec3>,
     /// The coupling block of every (vertex, spring) pair with its other end, by slices of rows
     /// (`coupling_slices`: the products stream these).
@@ -1640,7 +1642,8 @@ pub(crate) fn substep(
     };
     #[cfg(test)]
     let test_gain = s.test_gain;
-    let iterations = pool.team(|team| {
+    let members = s.team_sizer.members(pool.threads());
+    let (iterations, team_stats) = pool.team_of(members, |team| {
         if !reuse {
             state_pass(team, gradient_in_team.then_some(&gas_origin[..]), false);
         }
@@ -1941,6 +1944,7 @@ pub(crate) fn substep(
         }
         iterations
     });
+    s.team_sizer.record(team_stats);
     s.all_finite = s.sums.finite.iter().all(|&f| f);
     if prepare {
         s.prepared = Some(now);
