@@ -542,8 +542,9 @@ impl Cholesky {
         self.backward(node, SharedSlice(y, self.len()), false);
     }
 
-    /// Forward solve `L y = b` on the rows of part `node` (its halves, then its separator). On
-    /// one thread the two halves' subtrees go row by row side by side ([`Cholesky::forward_pair`]).
+    /// Forward solve `L y = b` on the rows of part `node` (its halves, then its separator). The
+    /// two halves' subtrees of a part solved by one thread go row by row side by side
+    /// ([`Cholesky::forward_pair`]).
     fn forward(&self, node: usize, y: SharedSlice, parallel: bool) {
         let part = self.parts[node];
         if let Some((a, b)) = part.children {
@@ -622,8 +623,8 @@ impl Cholesky {
         y[k] = (y[k] - sum) * self.inv_diag[k];
     }
 
-    /// Backward solve `Lᵀ x = y` on the rows of part `node` (its separator, then its halves; on
-    /// one thread side by side, as [`Cholesky::forward`]).
+    /// Backward solve `Lᵀ x = y` on the rows of part `node` (its separator, then its halves;
+    /// side by side within a thread, as [`Cholesky::forward`]).
     fn backward(&self, node: usize, y: SharedSlice, parallel: bool) {
         let part = self.parts[node];
         self.backward_separator(node, y);

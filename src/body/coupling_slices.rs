@@ -796,7 +796,9 @@ mod tests {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
             let mut out = vec![Vec3A::splat(f32::NAN); n - from];
-            // SAFETY: the processor has AVX2 and FMA (checked above).
+            // SAFETY: the processor has AVX2 and FMA (checked above); every other end is below n
+            // (checked first).
+            CheckedCouplings::new(&slices.offsets, &slices.groups, n);
             let dot = unsafe { product_slices_avx2(&slices.offsets, &slices.groups, input, from..n, terms, &mut out) };
             results.push((out, dot));
         }
@@ -941,6 +943,32 @@ mod tests {
         }
         let c = Coupling(Vec4::new(f32::NAN, f32::INFINITY, -0.0, 1.0)).rounded().0;
         assert!(c.x.is_nan() && c.y == f32::INFINITY && c.z.to_bits() == (-0.0f32).to_bits() && c.w == 1.0);
+    }
+
+    /// Couplings checked for some rows refuse an input of other rows (their other ends were
+    /// checked against the rows, not against that input).
+    #[test]
+    #[should_panic(expected = "checked rows")]
+    fn an_input_of_other_rows_than_checked_is_refused() {
+        let mut slices = CouplingSlices::default();
+        slices.layout(&[0, 1, 1]);
+        {
+            let mut view = SliceRowsMut { offsets: &slices.offsets, groups: &mut slices.groups, first_row: 0 };
+            view.set_row(0, [(Coupling::new(Vec3A::X, 1.0, 1.0), 1)].into_iter());
+            view.finish_row(1, 0);
+        }
+        let couplings = CheckedCouplings::new(&slices.offsets, &slices.groups, 2);
+        let input = vec![Vec3A::ONE; 1];
+        let terms = RowTerms {
+            mass: &[1.0; 1],
+            inv_mass: &[1.0; 1],
+            fragment: &[],
+            gradient: &[],
+            gas_scale: &[],
+            contact_slot: &[],
+            contact_normal: &[],
+        };
+        product_slices(couplings, &input, 0..1, &terms, &mut [Vec3A::ZERO; 1]);
     }
 
     #[test]

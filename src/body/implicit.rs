@@ -186,6 +186,12 @@ impl ImplicitScratch {
         self.contact_held.iter().any(|&held| held)
     }
 
+    /// The next `substeps` substeps with a team of one member ([`TeamSizer`]).
+    #[cfg(test)]
+    pub fn run_alone_for(&mut self, substeps: u32) {
+        self.team_sizer.alone_for(substeps);
+    }
+
     /// Whether the last substep prepared the next.
     #[cfg(test)]
     pub fn has_prepared(&self) -> bool {

@@ -1306,6 +1306,25 @@ mod tests {
         implicit_gas_ball(BodySettings { ground: true, ground_height: -1.2, threads, ..BodySettings::default() })
     }
 
+    /// Substeps run by a team of one member (as while another process holds a core) give the
+    /// same bits as the team of both threads, through the fall, the impact and the rest.
+    #[test]
+    fn a_team_of_one_member_steps_to_the_same_bits() {
+        let (mut both, mut mixed) = (ball(2), ball(2));
+        for step in 0..60 {
+            if step % 7 == 0 {
+                if let Scratch::Implicit(s) = &mut mixed.scratch {
+                    s.run_alone_for(3);
+                }
+            }
+            both.step().unwrap();
+            mixed.step().unwrap();
+            assert_eq!(both.nodes.x, mixed.nodes.x, "step {step}");
+            assert_eq!(both.nodes.v, mixed.nodes.v, "step {step}");
+        }
+        assert!(both.nodes.x.iter().any(|x| x.y < -1.1), "the ball reached the ground");
+    }
+
     /// A new implicit body has its coarse level for its substep length already (made when the
     /// body is made, not in the first step), and its steps are the same bits as those of a
     /// body whose scratch starts empty (the setup made in the first substep, as before).

@@ -209,7 +209,6 @@ mod tests {
         }
     }
 
-    /// A singular block falls back to its diagonal's inverse, finite where that is zero.
     /// Two rows at once are each row's block times its row, to the bit (whatever the rows'
     /// fourth lanes hold).
     #[cfg(target_arch = "x86_64")]
@@ -238,6 +237,7 @@ mod tests {
         }
     }
 
+    /// A singular block falls back to its diagonal's inverse, finite where that is zero.
     #[test]
     fn singular_blocks_invert_their_diagonal() {
         let mut parts = SymmetricParts::scalar(0.0);
