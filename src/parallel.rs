@@ -300,8 +300,11 @@ struct TeamSync {
     poisoned: AtomicBool,
     /// Members asleep in [`Team::barrier`] (the last to arrive wakes them only if there are).
     sleepers: Padded<AtomicUsize>,
-    /// Barriers passed, and long waits in them ([`TeamStats`]), added by the members at the end.
+    /// Barriers passed, and long waits in them ([`TeamStats`]), added by the members at the end
+    /// (read only by a team of several threads).
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
     barriers: AtomicUsize,
+    #[cfg_attr(not(feature = "parallel"), allow(dead_code))]
     long_waits: AtomicUsize,
     park: std::sync::Mutex<()>,
     wake: std::sync::Condvar,
