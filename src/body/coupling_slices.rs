@@ -945,52 +945,43 @@ mod tests {
         assert!(c.x.is_nan() && c.y == f32::INFINITY && c.z.to_bits() == (-0.0f32).to_bits() && c.w == 1.0);
     }
 
+    /// Two rows, the first with one coupling to `other` (the refusal tests' layout).
+    fn one_coupling_to(other: u32) -> CouplingSlices {
+        let mut slices = CouplingSlices::default();
+        slices.layout(&[0, 1, 1]);
+        let mut view = SliceRowsMut { offsets: &slices.offsets, groups: &mut slices.groups, first_row: 0 };
+        view.set_row(0, [(Coupling::new(Vec3A::X, 1.0, 1.0), other)].into_iter());
+        slices
+    }
+
+    /// Rows of unit mass (`ones`, one per row), without gas or contacts.
+    fn unit_rows(ones: &[f32]) -> RowTerms<'_> {
+        RowTerms {
+            mass: ones,
+            inv_mass: ones,
+            fragment: &[],
+            gradient: &[],
+            gas_scale: &[],
+            contact_slot: &[],
+            contact_normal: &[],
+        }
+    }
+
     /// Couplings checked for some rows refuse an input of other rows (their other ends were
     /// checked against the rows, not against that input).
     #[test]
     #[should_panic(expected = "checked rows")]
     fn an_input_of_other_rows_than_checked_is_refused() {
-        let mut slices = CouplingSlices::default();
-        slices.layout(&[0, 1, 1]);
-        {
-            let mut view = SliceRowsMut { offsets: &slices.offsets, groups: &mut slices.groups, first_row: 0 };
-            view.set_row(0, [(Coupling::new(Vec3A::X, 1.0, 1.0), 1)].into_iter());
-            view.finish_row(1, 0);
-        }
+        let slices = one_coupling_to(1);
         let couplings = CheckedCouplings::new(&slices.offsets, &slices.groups, 2);
-        let input = vec![Vec3A::ONE; 1];
-        let terms = RowTerms {
-            mass: &[1.0; 1],
-            inv_mass: &[1.0; 1],
-            fragment: &[],
-            gradient: &[],
-            gas_scale: &[],
-            contact_slot: &[],
-            contact_normal: &[],
-        };
-        product_slices(couplings, &input, 0..1, &terms, &mut [Vec3A::ZERO; 1]);
+        product_slices(couplings, &[Vec3A::ONE; 1], 0..1, &unit_rows(&[1.0; 1]), &mut [Vec3A::ZERO; 1]);
     }
 
     #[test]
     #[should_panic(expected = "not a row")]
     fn an_other_end_past_the_rows_is_refused() {
-        let mut slices = CouplingSlices::default();
-        slices.layout(&[0, 1, 1]);
-        {
-            let mut view = SliceRowsMut { offsets: &slices.offsets, groups: &mut slices.groups, first_row: 0 };
-            view.set_row(0, [(Coupling::new(Vec3A::X, 1.0, 1.0), 5)].into_iter());
-        }
-        let input = vec![Vec3A::ONE; 2];
-        let terms = RowTerms {
-            mass: &[1.0; 2],
-            inv_mass: &[1.0; 2],
-            fragment: &[],
-            gradient: &[],
-            gas_scale: &[],
-            contact_slot: &[],
-            contact_normal: &[],
-        };
-        let couplings = CheckedCouplings::new(&slices.offsets, &slices.groups, input.len());
-        product_slices(couplings, &input, 0..2, &terms, &mut [Vec3A::ZERO; 2]);
+        let slices = one_coupling_to(5);
+        let couplings = CheckedCouplings::new(&slices.offsets, &slices.groups, 2);
+        product_slices(couplings, &[Vec3A::ONE; 2], 0..2, &unit_rows(&[1.0; 2]), &mut [Vec3A::ZERO; 2]);
     }
 }
