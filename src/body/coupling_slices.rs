@@ -130,12 +130,35 @@ impl PackedCoupling {
 
 /// The `k`-th coupling of each of the eight rows of a slice, `w` and `alpha` in bfloat16 (96
 /// bytes, a cache line and a half: the product streams these).
+///
+/// Each lane's block is kept as the two 32-bit words of its [`PackedCoupling`] (`w.x` in the
+/// lower half of `xy`, `w.y` in the upper; `w.z` and `alpha` likewise in `za`), so a lane's f32
+/// is one shift or one mask of the word: the product widens the four components of a group in
+/// four instructions (eight from planes of u16), and the assembly stores the words it gathered
+/// as they are (it regrouped them into planes).
 #[repr(C, align(32))]
 #[derive(Clone, Copy, Default)]
 pub(crate) struct CouplingGroup {
-    pub(super) w: [[u16; SLICE]; 3],
-    pub(super) alpha: [u16; SLICE],
+    pub(super) xy: [u32; SLICE],
+    pub(super) za: [u32; SLICE],
     pub(super) other: [u32; SLICE],
+}
+
+impl CouplingGroup {
+    /// Lane `lane`'s block.
+    #[inline(always)]
+    pub(super) fn block(&self, lane: usize) -> PackedCoupling {
+        let (xy, za) = (self.xy[lane], self.za[lane]);
+        PackedCoupling([xy as u16, (xy >> 16) as u16, za as u16, (za >> 16) as u16])
+    }
+
+    /// Writes lane `lane`'s block.
+    #[inline(always)]
+    pub(super) fn set_block(&mut self, lane: usize, c: PackedCoupling) {
+        let [x, y, z, alpha] = c.0.map(u32::from);
+        self.xy[lane] = x | y << 16;
+        self.za[lane] = z | alpha << 16;
+    }
 }
 
 /// The couplings of all rows: per slice its first group (`offsets`, one more entry than slices)
@@ -221,10 +244,7 @@ impl CouplingSlices {
 
 /// Makes a lane padding: a zero block whose other end is `row`.
 fn pad(group: &mut CouplingGroup, lane: usize, row: usize) {
-    for axis in &mut group.w {
-        axis[lane] = 0;
-    }
-    group.alpha[lane] = 0;
+    group.set_block(lane, PackedCoupling::default());
     group.other[lane] = row as u32;
 }
 
@@ -306,11 +326,7 @@ impl RowMut<'_> {
             panic!("coupling {k} of row {} in a slice of {count}", self.row)
         };
         let lane = self.lane % SLICE;
-        let [x, y, z, alpha] = c.0;
-        group.w[0][lane] = x;
-        group.w[1][lane] = y;
-        group.w[2][lane] = z;
-        group.alpha[lane] = alpha;
+        group.set_block(lane, c);
         group.other[lane] = other;
     }
 
@@ -348,9 +364,10 @@ pub(crate) fn row_coupling_sum(offsets: &[u32], groups: &[CouplingGroup], input:
     for group in &groups[offsets[slice] as usize..offsets[slice + 1] as usize] {
         assert!((group.other[lane] as usize) < input.len(), "a coupling's other end is not a row");
         let d = input[row] - input[group.other[lane] as usize];
-        let w = Vec3A::new(from_bf16(group.w[0][lane]), from_bf16(group.w[1][lane]), from_bf16(group.w[2][lane]));
+        let [x, y, z, alpha] = group.block(lane).0.map(from_bf16);
+        let w = Vec3A::new(x, y, z);
         let s = w.x * d.x + w.y * d.y + w.z * d.z;
-        acc += from_bf16(group.alpha[lane]) * d + w * s;
+        acc += alpha * d + w * s;
     }
     acc
 }
@@ -436,20 +453,6 @@ unsafe fn load_rows_transposed(
     };
     let (x, y, z, _) = transpose_rows(r04, r15, r26, r37);
     (x, y, z)
-}
-
-/// Eight bfloat16 to f32: widened to 32 bits and shifted into the upper half. (A function with
-/// the target feature, not a closure: a closure does not inherit it, and its intrinsics became
-/// calls that made the product 2.5 times slower.)
-///
-/// # Safety
-/// The processor must have AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-unsafe fn widen(h: std::arch::x86_64::__m128i) -> std::arch::x86_64::__m256 {
-    use std::arch::x86_64::*;
-    _mm256_castsi256_ps(_mm256_slli_epi32::<16>(_mm256_cvtepu16_epi32(h)))
 }
 
 /// What a product with the implicit system's matrix adds to each row after its couplings' sum
@@ -623,6 +626,7 @@ unsafe fn product_slices_avx2(
     use std::arch::x86_64::*;
     let n = input.len();
     let free = _mm256_set1_epi32(-1);
+    let upper = _mm256_set1_epi32(0xFFFF_0000_u32 as i32);
     let first = rows.start;
     let (mut dots_low, mut dots_high) = (_mm256_setzero_pd(), _mm256_setzero_pd());
     let mut row = rows.start;
@@ -639,14 +643,19 @@ unsafe fn product_slices_avx2(
         };
         let (mut ax, mut ay, mut az) = (_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps());
         for group in &groups[offsets[slice] as usize..offsets[slice + 1] as usize] {
-            // SAFETY: each row of `w` and `alpha` is 16 aligned bytes (offsets 0 to 48 of a
-            // 32-byte aligned group).
+            // bfloat16 to f32: the lower half of a word shifted up, or the upper half masked.
+            // SAFETY: `xy` and `za` are 32 aligned bytes (offsets 0 and 32 of a 32-byte aligned
+            // group).
             let (wx, wy, wz, alpha) = unsafe {
+                let (xy, za) = (
+                    _mm256_load_si256(group.xy.as_ptr() as *const __m256i),
+                    _mm256_load_si256(group.za.as_ptr() as *const __m256i),
+                );
                 (
-                    widen(_mm_load_si128(group.w[0].as_ptr() as *const __m128i)),
-                    widen(_mm_load_si128(group.w[1].as_ptr() as *const __m128i)),
-                    widen(_mm_load_si128(group.w[2].as_ptr() as *const __m128i)),
-                    widen(_mm_load_si128(group.alpha.as_ptr() as *const __m128i)),
+                    _mm256_castsi256_ps(_mm256_slli_epi32::<16>(xy)),
+                    _mm256_castsi256_ps(_mm256_and_si256(xy, upper)),
+                    _mm256_castsi256_ps(_mm256_slli_epi32::<16>(za)),
+                    _mm256_castsi256_ps(_mm256_and_si256(za, upper)),
                 )
             };
             // SAFETY: every other end is below n (this function's contract).
@@ -836,8 +845,11 @@ mod tests {
         }
         let mut slices = CouplingSlices::default();
         // Garbage left in the groups from an earlier layout must not matter.
-        slices.groups =
-            vec![CouplingGroup { w: [[to_bf16(7.0); SLICE]; 3], alpha: [to_bf16(5.0); SLICE], other: [3; SLICE] }; 400];
+        let mut stale = CouplingGroup { other: [3; SLICE], ..CouplingGroup::default() };
+        for lane in 0..SLICE {
+            stale.set_block(lane, Coupling(Vec4::new(7.0, 7.0, 7.0, 5.0)).packed());
+        }
+        slices.groups = vec![stale; 400];
         slices.layout(&row_offsets);
         {
             let mut view = SliceRowsMut { offsets: &slices.offsets, groups: &mut slices.groups, first_row: 0 };
@@ -943,6 +955,27 @@ mod tests {
         }
         let c = Coupling(Vec4::new(f32::NAN, f32::INFINITY, -0.0, 1.0)).rounded().0;
         assert!(c.x.is_nan() && c.y == f32::INFINITY && c.z.to_bits() == (-0.0f32).to_bits() && c.w == 1.0);
+    }
+
+    /// A lane's block goes into the group's words and comes back the same, without touching
+    /// the other lanes; the product's shift and mask read each component's f32.
+    #[test]
+    fn a_lane_block_round_trips_through_the_words() {
+        let mut group = CouplingGroup::default();
+        let blocks: [PackedCoupling; SLICE] = std::array::from_fn(|lane| {
+            let l = lane as f32;
+            Coupling(Vec4::new(-1.5 - l, 2.25 * l, 1e-30 + l, 3.0e5 / (1.0 + l))).packed()
+        });
+        for (lane, &b) in blocks.iter().enumerate() {
+            group.set_block(lane, b);
+        }
+        for (lane, &b) in blocks.iter().enumerate() {
+            assert_eq!(group.block(lane), b, "lane {lane}");
+            let (xy, za) = (group.xy[lane], group.za[lane]);
+            let read = [f32::from_bits(xy << 16), f32::from_bits(xy & 0xFFFF_0000), f32::from_bits(za << 16)];
+            let alpha = f32::from_bits(za & 0xFFFF_0000);
+            assert_eq!(Coupling(Vec4::new(read[0], read[1], read[2], alpha)), b.unpacked(), "lane {lane}");
+        }
     }
 
     /// Two rows, the first with one coupling to `other` (the refusal tests' layout).

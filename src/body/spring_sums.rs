@@ -108,7 +108,7 @@ pub(crate) unsafe fn slice_spring_sums_avx2(
     assert!(first_row + SLICE <= i32::MAX as usize);
     let rows = _mm256_add_epi32(_mm256_set1_epi32(first_row as i32), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
     let sign_bit = _mm256_set1_epi32(i32::MIN);
-    let (low, high) = (_mm256_set1_epi32(0xFFFF), _mm256_set1_epi32(0xFFFF_0000_u32 as i32));
+    let high = _mm256_set1_epi32(0xFFFF_0000_u32 as i32);
     let zero = _mm256_setzero_ps();
     let (mut rx, mut ry, mut rz, mut extension) = (zero, zero, zero, zero);
     // `Σ w wᵀ` (xx, yy, zz, xy, yz, zx) and `Σ alpha`.
@@ -136,22 +136,12 @@ pub(crate) unsafe fn slice_spring_sums_avx2(
         let a = _mm256_castsi256_ps(_mm256_and_si256(za, high));
         add_outer_lanes(&mut outer, [wx, wy, wz], [wx, wy, wz]);
         alpha = _mm256_add_ps(alpha, a);
-        // The halves as eight u16 per axis: packed per 128-bit half (x0-3 y0-3 | x4-7 y4-7),
-        // then the quarters reordered (x0-7 | y0-7).
-        let xy16 = _mm256_permute4x64_epi64::<0b11_01_10_00>(_mm256_packus_epi32(
-            _mm256_and_si256(xy, low),
-            _mm256_srli_epi32::<16>(xy),
-        ));
-        let za16 = _mm256_permute4x64_epi64::<0b11_01_10_00>(_mm256_packus_epi32(
-            _mm256_and_si256(za, low),
-            _mm256_srli_epi32::<16>(za),
-        ));
-        // SAFETY: each row of `w` and `alpha` is 16 aligned bytes (offsets 0 to 48).
+        // The blocks' words as the groups keep them.
+        // SAFETY: `xy` and `za` are 32 aligned bytes (offsets 0 and 32 of a 32-byte aligned
+        // group).
         unsafe {
-            _mm_store_si128(group.w[0].as_mut_ptr() as *mut __m128i, _mm256_castsi256_si128(xy16));
-            _mm_store_si128(group.w[1].as_mut_ptr() as *mut __m128i, _mm256_extracti128_si256::<1>(xy16));
-            _mm_store_si128(group.w[2].as_mut_ptr() as *mut __m128i, _mm256_castsi256_si128(za16));
-            _mm_store_si128(group.alpha.as_mut_ptr() as *mut __m128i, _mm256_extracti128_si256::<1>(za16));
+            _mm256_store_si256(group.xy.as_mut_ptr() as *mut __m256i, xy);
+            _mm256_store_si256(group.za.as_mut_ptr() as *mut __m256i, za);
         }
     }
     let mut sums = SliceSums::default();
@@ -278,8 +268,8 @@ mod tests {
         by_slices.layout_springs(&springs);
         // Blocks left from an earlier step must be overwritten, padding included.
         for group in &mut by_slices.groups {
-            group.w = [[0x4000; SLICE]; 3];
-            group.alpha = [0x3F80; SLICE];
+            group.xy = [0x4000_4000; SLICE];
+            group.za = [0x3F80_4000; SLICE];
         }
         assert!(by_slices.springs.iter().flatten().any(|&s| s == NO_SPRING), "padding in the test");
         let mut rows = SliceRowsMut { offsets: &by_rows.offsets, groups: &mut by_rows.groups, first_row: 0 };
@@ -298,7 +288,7 @@ mod tests {
             }
         }
         for (g, (a, b)) in by_rows.groups.iter().zip(&by_slices.groups).enumerate() {
-            assert_eq!((a.w, a.alpha, a.other), (b.w, b.alpha, b.other), "group {g}");
+            assert_eq!((a.xy, a.za, a.other), (b.xy, b.za, b.other), "group {g}");
         }
         // Some sums are far from zero, so the comparison means something.
         assert!(expected.iter().filter(|s| s.rhs.length() > 10.0 && s.outer.diagonal.x > 1.0).count() > n / 2);
@@ -332,7 +322,7 @@ mod tests {
         // SAFETY: AVX2 (checked above).
         let second = unsafe { slice_spring_sums_avx2(&mut groups, &springs, &terms, 8) };
         assert_eq!(second.lane(0).rhs, Vec3A::new(-1.0, -2.0, -3.0));
-        assert_eq!(groups[0].w[0][0], Coupling::new(Vec3A::X, 2.0, 4.0).packed().0[0]);
-        assert_eq!((groups[0].w[0][2], groups[0].alpha[3]), (0, 0));
+        assert_eq!(groups[0].block(0), Coupling::new(Vec3A::X, 2.0, 4.0).packed());
+        assert_eq!((groups[0].block(2), groups[0].block(3)), (PackedCoupling::default(), PackedCoupling::default()));
     }
 }
