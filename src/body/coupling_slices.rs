@@ -141,7 +141,9 @@ impl PackedCoupling {
 pub(crate) struct CouplingGroup {
     pub(super) xy: [u32; SLICE],
     pub(super) za: [u32; SLICE],
-    pub(super) other: [u32; SLICE],
+    /// Per lane where the other end's row starts in the input seen as f32: 4 × the row (see
+    /// [`CouplingGroup::set_other`]).
+    pub(super) other_offset: [u32; SLICE],
 }
 
 impl CouplingGroup {
@@ -159,7 +161,27 @@ impl CouplingGroup {
         self.xy[lane] = x | y << 16;
         self.za[lane] = z | alpha << 16;
     }
+
+    /// Lane `lane`'s other end.
+    #[inline(always)]
+    pub(super) fn other_row(&self, lane: usize) -> usize {
+        (self.other_offset[lane] / 4) as usize
+    }
+
+    /// Makes `row` lane `lane`'s other end. Kept as its offset in f32 (`row` below
+    /// [`MAX_ROWS`]): the product's loads then take it as it is, where a row index needs a
+    /// shift first (an address scales an index by at most 8, a row is 16 bytes): eight
+    /// instructions of a group's 50-odd.
+    #[inline(always)]
+    pub(super) fn set_other(&mut self, lane: usize, row: u32) {
+        debug_assert!((row as usize) < MAX_ROWS);
+        self.other_offset[lane] = 4 * row;
+    }
 }
+
+/// Rows a layout may have: 4 × a row, and of each lane of the last slice, fits an i32 (the
+/// assembly compares rows with other ends that way, `spring_sums`).
+pub(crate) const MAX_ROWS: usize = (1 << 29) - SLICE;
 
 /// The couplings of all rows: per slice its first group (`offsets`, one more entry than slices)
 /// and the groups.
@@ -197,7 +219,7 @@ impl CouplingSlices {
             for (k, g) in groups.enumerate() {
                 match around.get(k) {
                     Some(&(spring, other)) => {
-                        self.groups[g].other[lane] = other;
+                        self.groups[g].set_other(lane, other);
                         self.springs[g][lane] = spring;
                     }
                     None => pad(&mut self.groups[g], lane, row),
@@ -213,6 +235,7 @@ impl CouplingSlices {
     pub fn layout(&mut self, row_offsets: &[u32]) {
         self.adjacency_id = 0;
         let n = row_offsets.len().saturating_sub(1);
+        assert!(n <= MAX_ROWS, "{n} rows, more than the {MAX_ROWS} a layout takes");
         let slices = n.div_ceil(SLICE);
         self.offsets.clear();
         self.offsets.reserve(slices + 1);
@@ -245,7 +268,7 @@ impl CouplingSlices {
 /// Makes a lane padding: a zero block whose other end is `row`.
 fn pad(group: &mut CouplingGroup, lane: usize, row: usize) {
     group.set_block(lane, PackedCoupling::default());
-    group.other[lane] = row as u32;
+    group.set_other(lane, row as u32);
 }
 
 /// The groups that hold rows `rows` (`rows.start` a multiple of [`SLICE`], `rows.end` too or the
@@ -327,7 +350,7 @@ impl RowMut<'_> {
         };
         let lane = self.lane % SLICE;
         group.set_block(lane, c);
-        group.other[lane] = other;
+        group.set_other(lane, other);
     }
 
     /// Pads the row's lanes from its `count`-th coupling to the end of its slice (every row is
@@ -362,8 +385,9 @@ pub(crate) fn row_coupling_sum(offsets: &[u32], groups: &[CouplingGroup], input:
     let (slice, lane) = (row / SLICE, row % SLICE);
     let mut acc = Vec3A::ZERO;
     for group in &groups[offsets[slice] as usize..offsets[slice + 1] as usize] {
-        assert!((group.other[lane] as usize) < input.len(), "a coupling's other end is not a row");
-        let d = input[row] - input[group.other[lane] as usize];
+        let other = group.other_row(lane);
+        assert!(other < input.len(), "a coupling's other end is not a row");
+        let d = input[row] - input[other];
         let [x, y, z, alpha] = group.block(lane).0.map(from_bf16);
         let w = Vec3A::new(x, y, z);
         let s = w.x * d.x + w.y * d.y + w.z * d.z;
@@ -372,16 +396,17 @@ pub(crate) fn row_coupling_sum(offsets: &[u32], groups: &[CouplingGroup], input:
     acc
 }
 
-/// Eight `Vec3A` rows of `input` (`rows[lane]`), as their x, y and z lanes.
+/// Eight `Vec3A` rows of `input` (from the f32 at `offsets[lane]`: 4 × the row), as their x, y
+/// and z lanes.
 ///
 /// # Safety
-/// The processor must have AVX2; every index must be below `input.len()`.
+/// The processor must have AVX2; every offset plus 4 must be at most `4 * input.len()`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 unsafe fn load_transposed(
     input: &[Vec3A],
-    rows: &[u32; SLICE],
+    offsets: &[u32; SLICE],
 ) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
     use std::arch::x86_64::*;
     let base = input.as_ptr() as *const f32;
@@ -390,9 +415,10 @@ unsafe fn load_transposed(
     // to 64 bits, then `vpextrq` and `vmovq` per pair), which kept the loads of the rows
     // waiting. Read one by one, the product's share of a 1-thread profile of the issue-5
     // balloon went from 26.0% to 23.1%.
-    // SAFETY: each index is a row of `input` (the caller's contract): 16 aligned bytes; the
-    // index is an initialized u32 of the array.
-    let row = |lane: usize| unsafe { _mm_load_ps(base.add(4 * std::ptr::read_volatile(&rows[lane]) as usize)) };
+    // SAFETY: 16 bytes of `input` from each offset (the caller's contract), read unaligned (an
+    // offset that is no multiple of 4 reads parts of two rows, never past the input); the
+    // offset is an initialized u32 of the array.
+    let row = |lane: usize| unsafe { _mm_loadu_ps(base.add(std::ptr::read_volatile(&offsets[lane]) as usize)) };
     let (x, y, z, _) = transpose_rows(
         _mm256_set_m128(row(4), row(0)),
         _mm256_set_m128(row(5), row(1)),
@@ -509,8 +535,9 @@ impl<'a> CheckedCouplings<'a> {
     /// Panics if an other end is not below `rows`.
     pub fn new(offsets: &'a [u32], groups: &'a [CouplingGroup], rows: usize) -> Self {
         // The largest other end (a maximum, which the compiler runs eight lanes at a time).
-        let largest = groups.iter().fold(0u32, |m, group| group.other.iter().fold(m, |m, &o| m.max(o)));
-        assert!(groups.is_empty() || (largest as usize) < rows, "a coupling's other end is not a row");
+        let largest = groups.iter().fold(0u32, |m, group| group.other_offset.iter().fold(m, |m, &o| m.max(o)));
+        // (The product loads 16 bytes from each offset, so a row's four f32 must all be there.)
+        assert!(groups.is_empty() || largest as usize + 4 <= 4 * rows, "a coupling's other end is not a row");
         Self { offsets, groups, rows }
     }
 }
@@ -637,8 +664,8 @@ unsafe fn product_slices_avx2(
             // SAFETY: rows row..row + 8 are rows of `input` (row + 8 <= rows.end <= n).
             unsafe { load_rows_transposed(input, row) }
         } else {
-            let own: [u32; SLICE] = std::array::from_fn(|lane| (row + lane).min(n - 1) as u32);
-            // SAFETY: every index of `own` is below n (clamped above).
+            let own: [u32; SLICE] = std::array::from_fn(|lane| 4 * (row + lane).min(n - 1) as u32);
+            // SAFETY: every offset of `own` is that of a row below n (clamped above).
             unsafe { load_transposed(input, &own) }
         };
         let (mut ax, mut ay, mut az) = (_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps());
@@ -659,7 +686,7 @@ unsafe fn product_slices_avx2(
                 )
             };
             // SAFETY: every other end is below n (this function's contract).
-            let (px, py, pz) = unsafe { load_transposed(input, &group.other) };
+            let (px, py, pz) = unsafe { load_transposed(input, &group.other_offset) };
             let dx = _mm256_sub_ps(xx, px);
             let dy = _mm256_sub_ps(xy, py);
             let dz = _mm256_sub_ps(xz, pz);
@@ -845,7 +872,7 @@ mod tests {
         }
         let mut slices = CouplingSlices::default();
         // Garbage left in the groups from an earlier layout must not matter.
-        let mut stale = CouplingGroup { other: [3; SLICE], ..CouplingGroup::default() };
+        let mut stale = CouplingGroup { other_offset: [12; SLICE], ..CouplingGroup::default() };
         for lane in 0..SLICE {
             stale.set_block(lane, Coupling(Vec4::new(7.0, 7.0, 7.0, 5.0)).packed());
         }

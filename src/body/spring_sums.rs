@@ -17,6 +17,8 @@
 use glam::{Vec3, Vec3A};
 
 #[cfg(target_arch = "x86_64")]
+use super::coupling_slices::MAX_ROWS;
+#[cfg(target_arch = "x86_64")]
 use super::coupling_slices::transpose_rows;
 use super::coupling_slices::{CouplingGroup, PackedCoupling, RowMut, SLICE};
 use super::spring_terms::SpringTerms;
@@ -105,8 +107,13 @@ pub(crate) unsafe fn slice_spring_sums_avx2(
 ) -> SliceSums {
     use std::arch::x86_64::*;
     assert!(groups.len() == springs.len(), "{} groups, {} lanes of springs", groups.len(), springs.len());
-    assert!(first_row + SLICE <= i32::MAX as usize);
-    let rows = _mm256_add_epi32(_mm256_set1_epi32(first_row as i32), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+    // Each lane's row as an offset in f32, as the other ends are kept (4 × each row of a layout
+    // and of the lanes past its last row fits an i32).
+    assert!(first_row < MAX_ROWS);
+    let rows = _mm256_slli_epi32::<2>(_mm256_add_epi32(
+        _mm256_set1_epi32(first_row as i32),
+        _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+    ));
     let sign_bit = _mm256_set1_epi32(i32::MIN);
     let high = _mm256_set1_epi32(0xFFFF_0000_u32 as i32);
     let zero = _mm256_setzero_ps();
@@ -121,8 +128,8 @@ pub(crate) unsafe fn slice_spring_sums_avx2(
         });
         // SAFETY: each pointer is a live `SpringTerms` (checked above).
         let ((tx, ty, tz, te), (xy, za)) = unsafe { (load_terms(&records), load_blocks(&records)) };
-        // SAFETY: `other` is 32 aligned bytes (offset 64 of a 32-byte aligned group).
-        let other = unsafe { _mm256_load_si256(group.other.as_ptr() as *const __m256i) };
+        // SAFETY: `other_offset` is 32 aligned bytes (offset 64 of a 32-byte aligned group).
+        let other = unsafe { _mm256_load_si256(group.other_offset.as_ptr() as *const __m256i) };
         // The terms are seen from the spring's lower end: negated at the higher one.
         let sign = _mm256_castsi256_ps(_mm256_and_si256(_mm256_cmpgt_epi32(rows, other), sign_bit));
         rx = _mm256_add_ps(rx, _mm256_xor_ps(tx, sign));
@@ -288,7 +295,7 @@ mod tests {
             }
         }
         for (g, (a, b)) in by_rows.groups.iter().zip(&by_slices.groups).enumerate() {
-            assert_eq!((a.xy, a.za, a.other), (b.xy, b.za, b.other), "group {g}");
+            assert_eq!((a.xy, a.za, a.other_offset), (b.xy, b.za, b.other_offset), "group {g}");
         }
         // Some sums are far from zero, so the comparison means something.
         assert!(expected.iter().filter(|s| s.rhs.length() > 10.0 && s.outer.diagonal.x > 1.0).count() > n / 2);
@@ -308,7 +315,9 @@ mod tests {
             coupling: Coupling::new(Vec3A::X, 2.0, 4.0).packed(),
         }];
         let mut groups = [CouplingGroup::default()];
-        groups[0].other = [1; SLICE];
+        for lane in 0..SLICE {
+            groups[0].set_other(lane, 1);
+        }
         let springs = [[0, 1, NO_SPRING, 7, 0, 0, 0, 0]];
         // SAFETY: AVX2 (checked above).
         let sums = unsafe { slice_spring_sums_avx2(&mut groups, &springs, &terms, 0) };
