@@ -668,14 +668,18 @@ fn initial_chunk(
     contact: ContactRows,
     any_contact: bool,
 ) -> f64 {
+    // The chunk's rows of every array, sliced once (no bounds check per row).
+    let n = r.len();
+    let rows = first..first + n;
+    let (rhs, inv_diag, ap, z) = (&rhs[rows.clone()], &inv_diag[rows.clone()], &ap[..n], &mut z[..n]);
+    let contact = if any_contact { contact.rows(rows) } else { ContactRows::default() };
     let mut rz = 0.0f64;
-    for k in 0..r.len() {
-        let i = first + k;
-        let mut ri = rhs[i] - ap[k];
-        let mut zi = inv_diag[i].apply(ri);
+    for k in 0..n {
+        let mut ri = rhs[k] - ap[k];
+        let mut zi = inv_diag[k].apply(ri);
         if any_contact {
-            ri = contact.apply(i, ri);
-            zi = contact.apply(i, zi);
+            ri = contact.apply(k, ri);
+            zi = contact.apply(k, zi);
         }
         r[k] = ri;
         z[k] = zi;
@@ -1871,17 +1875,21 @@ pub(crate) fn substep(
                     dv
                 }
             };
+            // The chunk's rows of the arrays read per row, sliced once (no bounds check per row).
+            let n_rows = x.len();
+            let inv_mass = &model.inv_mass[first..first + n_rows];
+            let (dv, slots) = (&dv[..n_rows], contact.slot.get(first..first + n_rows).unwrap_or(&[]));
             let mut all_finite = true;
-            for k in 0..x.len() {
+            for k in 0..n_rows {
                 let i = first + k;
                 let dvi = dv[k];
-                if model.inv_mass[i] == 0.0 {
+                if inv_mass[k] == 0.0 {
                     all_finite &= x[k].is_finite() && v[k].is_finite();
                     continue;
                 }
                 let v = &mut v[k];
                 *v += Vec3::from(dvi);
-                if let Some(&slot) = contact.slot.get(i).filter(|&&slot| slot != u32::MAX) {
+                if let Some(&slot) = slots.get(k).filter(|&&slot| slot != u32::MAX) {
                     let normal = contact.normal[slot as usize];
                     let delta = slip[i];
                     if delta != Vec3A::ZERO {
