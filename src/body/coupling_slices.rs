@@ -35,6 +35,7 @@ use std::ops::Range;
 
 use glam::{Vec3, Vec3A, Vec4};
 
+use super::gas::MIXED_FRAGMENTS;
 use super::springs::Springs;
 
 /// Rows per slice (the lanes of a 256-bit register of f32).
@@ -490,8 +491,10 @@ pub(crate) struct RowTerms<'a> {
     pub mass: &'a [f32],
     pub inv_mass: &'a [f32],
     /// The gas's rank-one term `g (h² P/V Σ g·x)`: per row its fragment (`u32::MAX`: none) and
-    /// gradient `g`, per fragment the scale (empty `fragment`: no gas).
+    /// gradient `g`, per fragment the scale (empty `fragment`: no gas); per slice the fragment
+    /// its rows share or `gas::MIXED_FRAGMENTS` (`gas::slice_fragments` of `fragment`).
     pub fragment: &'a [u32],
+    pub slice_fragment: &'a [u32],
     pub gradient: &'a [Vec3],
     pub gas_scale: &'a [f32],
     /// The contact filter: per row the slot of its contact normal (`u32::MAX`: free; empty: no
@@ -597,7 +600,12 @@ pub(crate) fn product_slices(
     let (offsets, groups) = (couplings.offsets, couplings.groups);
     assert!(out.len() == rows.len() && rows.end <= n && rows.start % SLICE == 0, "rows {rows:?} of {n}");
     assert!(terms.mass.len() == n && terms.inv_mass.len() == n);
-    assert!(terms.fragment.is_empty() || (terms.fragment.len() == n && terms.gradient.len() == n));
+    assert!(
+        terms.fragment.is_empty()
+            || (terms.fragment.len() == n
+                && terms.gradient.len() == n
+                && terms.slice_fragment.len() == n.div_ceil(SLICE))
+    );
     assert!(terms.contact_slot.is_empty() || terms.contact_slot.len() == n);
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
@@ -763,8 +771,9 @@ unsafe fn product_slices_avx2(
         let mut rz = _mm256_add_ps(_mm256_mul_ps(xz, mass), az);
         if !terms.fragment.is_empty() {
             let fragment = &terms.fragment[row..row + SLICE];
-            let scale = if fragment.iter().all(|&f| f == fragment[0]) {
-                (fragment[0] != u32::MAX).then(|| _mm256_set1_ps(terms.gas_scale[fragment[0] as usize]))
+            let shared = terms.slice_fragment[slice];
+            let scale = if shared != MIXED_FRAGMENTS {
+                (shared != u32::MAX).then(|| _mm256_set1_ps(terms.gas_scale[shared as usize]))
             } else {
                 let scale: [f32; SLICE] = std::array::from_fn(|lane| match fragment[lane] {
                     u32::MAX => 0.0,
@@ -848,6 +857,7 @@ unsafe fn product_slices_avx2(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::body::gas::slice_fragments;
 
     /// Both paths of [`product_slices`] (the AVX2 one where the processor has it) from row
     /// `from`: each row and the dot product.
@@ -934,6 +944,8 @@ mod tests {
                 _ => [0, 1, u32::MAX][i as usize % 3],
             })
             .collect();
+        let slice_fragment = slice_fragments(&fragment);
+        assert!(slice_fragment.contains(&0) && slice_fragment.contains(&MIXED_FRAGMENTS));
         let gradient: Vec<Vec3> = (0..n).map(|_| Vec3::new(unit(), unit(), unit())).collect();
         let gas_scale = [0.37f32, -1.25];
         let normals = [Vec3A::Y, Vec3A::new(0.6, 0.8, 0.0)];
@@ -944,6 +956,7 @@ mod tests {
                 mass: &mass,
                 inv_mass: &inv_mass,
                 fragment: if gas { &fragment } else { &[] },
+                slice_fragment: if gas { &slice_fragment } else { &[] },
                 gradient: if gas { &gradient } else { &[] },
                 gas_scale: &gas_scale,
                 contact_slot: if contacts { &contact_slot } else { &[] },
@@ -1053,6 +1066,7 @@ mod tests {
             mass: ones,
             inv_mass: ones,
             fragment: &[],
+            slice_fragment: &[],
             gradient: &[],
             gas_scale: &[],
             contact_slot: &[],

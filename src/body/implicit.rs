@@ -342,8 +342,10 @@ struct System<'a> {
     x: &'a [Vec3],
     v: &'a [Vec3],
     h: f32,
-    /// Gas fragment of each vertex and its ∂V/∂x, with `h² P/V` per fragment (no gas: empty).
+    /// Gas fragment of each vertex (and per slice, `Gas::slice_vertex_fragment`) and its ∂V/∂x,
+    /// with `h² P/V` per fragment (no gas: empty).
     vertex_fragment: &'a [u32],
+    slice_fragment: &'a [u32],
     gradient: &'a [Vec3],
     gas_coef: &'a [f64],
     gas_pressure: &'a [f64],
@@ -541,14 +543,11 @@ fn slice_vertex_gas<'a>(sys: &'a System, first: usize, whole: bool, gas_dot_v: &
     if sys.vertex_fragment.is_empty() {
         return Some(None);
     }
-    let fragment = &sys.vertex_fragment[first..first + SLICE];
-    if fragment.iter().any(|&f| f != fragment[0]) {
-        return None;
-    }
-    if fragment[0] == u32::MAX {
-        return Some(None);
-    }
-    let frag = fragment[0] as usize;
+    let frag = match sys.slice_fragment[first / SLICE] {
+        gas::MIXED_FRAGMENTS => return None,
+        u32::MAX => return Some(None),
+        f => f as usize,
+    };
     Some(Some(SliceGas { gradient: &sys.gradient[first..first + SLICE], terms: sys.gas_terms(frag, gas_dot_v) }))
 }
 
@@ -630,6 +629,7 @@ fn product_rows(
         mass: model.mass,
         inv_mass: model.inv_mass,
         fragment: sys.vertex_fragment,
+        slice_fragment: sys.slice_fragment,
         gradient: if sys.vertex_fragment.is_empty() { &[] } else { sys.gradient },
         gas_scale,
         contact_slot: contact.slot,
@@ -710,6 +710,8 @@ fn direction_chunk(
     let inv_mass = &sys.model.inv_mass[rows.clone()];
     let contact = contact.rows(rows.clone());
     let fragment = sys.vertex_fragment.get(rows.clone()).unwrap_or(&[]);
+    // (A chunk starts a slice: CHUNK is a multiple of SLICE.)
+    let slices = sys.slice_fragment.get(rows.start / SLICE..rows.end.div_ceil(SLICE)).unwrap_or(&[]);
     let gradient = sys.gradient.get(rows.clone()).unwrap_or(&[]);
     if let Some((view, solution)) = coarse.filter(|(view, _)| view.rows_of(rows.clone()).is_none()) {
         // A vertex the coarse level does not know (never after a split, which extends it): the
@@ -733,24 +735,59 @@ fn direction_chunk(
     }
     let coarse = coarse.and_then(|(view, solution)| Some((view.rows_of(rows.clone())?, solution)));
     match (coarse, contact.is_empty(), fragment.is_empty()) {
-        (Some(coarse), true, true) => {
-            direction_rows::<true, false, false>(p, z, inv_mass, coarse, contact, (fragment, gradient), beta, gas)
-        }
-        (Some(coarse), true, false) => {
-            direction_rows::<true, false, true>(p, z, inv_mass, coarse, contact, (fragment, gradient), beta, gas)
-        }
-        (Some(coarse), false, true) => {
-            direction_rows::<true, true, false>(p, z, inv_mass, coarse, contact, (fragment, gradient), beta, gas)
-        }
+        (Some(coarse), true, true) => direction_rows::<true, false, false>(
+            p,
+            z,
+            inv_mass,
+            coarse,
+            contact,
+            (fragment, slices, gradient),
+            beta,
+            gas,
+        ),
+        (Some(coarse), true, false) => direction_rows::<true, false, true>(
+            p,
+            z,
+            inv_mass,
+            coarse,
+            contact,
+            (fragment, slices, gradient),
+            beta,
+            gas,
+        ),
+        (Some(coarse), false, true) => direction_rows::<true, true, false>(
+            p,
+            z,
+            inv_mass,
+            coarse,
+            contact,
+            (fragment, slices, gradient),
+            beta,
+            gas,
+        ),
         (Some(coarse), false, false) => {
-            direction_rows::<true, true, true>(p, z, inv_mass, coarse, contact, (fragment, gradient), beta, gas)
+            direction_rows::<true, true, true>(p, z, inv_mass, coarse, contact, (fragment, slices, gradient), beta, gas)
         }
-        (None, _, true) => {
-            direction_rows::<false, false, false>(p, z, inv_mass, (&[], &[]), contact, (fragment, gradient), beta, gas)
-        }
-        (None, _, false) => {
-            direction_rows::<false, false, true>(p, z, inv_mass, (&[], &[]), contact, (fragment, gradient), beta, gas)
-        }
+        (None, _, true) => direction_rows::<false, false, false>(
+            p,
+            z,
+            inv_mass,
+            (&[], &[]),
+            contact,
+            (fragment, slices, gradient),
+            beta,
+            gas,
+        ),
+        (None, _, false) => direction_rows::<false, false, true>(
+            p,
+            z,
+            inv_mass,
+            (&[], &[]),
+            contact,
+            (fragment, slices, gradient),
+            beta,
+            gas,
+        ),
     }
 }
 
@@ -765,7 +802,7 @@ fn direction_rows<const COARSE: bool, const CONTACT: bool, const GAS: bool>(
     inv_mass: &[f32],
     (row_of, solution): (&[u32], &[Vec3A]),
     contact: ContactRows,
-    (fragment, gradient): (&[u32], &[Vec3]),
+    (fragment, slice_fragment, gradient): (&[u32], &[u32], &[Vec3]),
     beta: f32,
     gas: &mut [f64],
 ) {
@@ -773,7 +810,7 @@ fn direction_rows<const COARSE: bool, const CONTACT: bool, const GAS: bool>(
     assert!(z.len() == n && inv_mass.len() == n);
     assert!(!COARSE || row_of.len() == n);
     assert!(!CONTACT || contact.slot.len() == n);
-    assert!(!GAS || (fragment.len() == n && gradient.len() == n));
+    assert!(!GAS || (fragment.len() == n && slice_fragment.len() == n.div_ceil(SLICE) && gradient.len() == n));
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: the processor has the features the function is compiled for (checked above).
@@ -784,7 +821,7 @@ fn direction_rows<const COARSE: bool, const CONTACT: bool, const GAS: bool>(
                 inv_mass,
                 (row_of, solution),
                 contact,
-                (fragment, gradient),
+                (fragment, slice_fragment, gradient),
                 beta,
                 gas,
             )
@@ -834,7 +871,7 @@ unsafe fn direction_rows_avx2<const COARSE: bool, const CONTACT: bool, const GAS
     inv_mass: &[f32],
     (row_of, solution): (&[u32], &[Vec3A]),
     contact: ContactRows,
-    (fragment, gradient): (&[u32], &[Vec3]),
+    (fragment, slice_fragment, gradient): (&[u32], &[u32], &[Vec3]),
     beta: f32,
     gas: &mut [f64],
 ) {
@@ -895,9 +932,9 @@ unsafe fn direction_rows_avx2<const COARSE: bool, const CONTACT: bool, const GAS
         if !GAS {
             continue;
         }
-        let frag = &fragment[first..first + SLICE];
-        if frag.iter().all(|&f| f == frag[0]) {
-            if frag[0] == u32::MAX {
+        let shared = slice_fragment[first / SLICE];
+        if shared != gas::MIXED_FRAGMENTS {
+            if shared == u32::MAX {
                 continue;
             }
             // The eight rows as x, y and z lanes: pairs (0 1), (2 3), (4 5), (6 7) regrouped as
@@ -924,7 +961,7 @@ unsafe fn direction_rows_avx2<const COARSE: bool, const CONTACT: bool, const GAS
             );
             let half = _mm_add_pd(_mm256_castpd256_pd128(wide), _mm256_extractf128_pd::<1>(wide));
             let sum = _mm_cvtsd_f64(_mm_add_sd(half, _mm_unpackhi_pd(half, half)));
-            run.add(gas, frag[0] as usize, sum);
+            run.add(gas, shared as usize, sum);
         } else {
             for (q, pair) in pairs.iter().enumerate() {
                 let k = first + 2 * q;
@@ -1669,6 +1706,7 @@ pub(crate) fn substep(
                 v: unsafe { vs.whole() },
                 h,
                 vertex_fragment: gas.map_or(&[][..], |g| &g.vertex_fragment),
+                slice_fragment: gas.map_or(&[][..], |g| &g.slice_vertex_fragment),
                 gradient: unsafe { gradient.whole() },
                 gas_coef: unsafe { gas_coef.whole() },
                 gas_pressure: gas.map_or(&[][..], |g| &g.pressure),
@@ -2010,6 +2048,9 @@ mod tests {
                 _ => (k / 10) as u32 % 3,
             })
             .collect();
+        let slice_fragment = gas::slice_fragments(&fragment);
+        assert!(slice_fragment.contains(&0) && slice_fragment.contains(&u32::MAX));
+        assert!(slice_fragment.contains(&gas::MIXED_FRAGMENTS));
         // Every fourth vertex of the first three slices touches, its normal in the next free slot.
         let mut slot = vec![u32::MAX; n];
         let mut normal = vec![Vec3A::ZERO; n];
@@ -2042,7 +2083,11 @@ mod tests {
                     let mut p = p0.clone();
                     let mut sums = [0.0f64; 3];
                     let coarse_rows = if coarse { (&row_of[..], &solution[..]) } else { (&[][..], &[][..]) };
-                    let gas_rows = if gas { (&fragment[..], &gradient[..]) } else { (&[][..], &[][..]) };
+                    let gas_rows = if gas {
+                        (&fragment[..], &slice_fragment[..], &gradient[..])
+                    } else {
+                        (&[][..], &[][..], &[][..])
+                    };
                     let args = (&mut p, &z[..], &inv_mass[..], coarse_rows, contacts, gas_rows, beta, &mut sums[..]);
                     match (coarse, contact, gas) {
                         (false, _, false) => direction_rows::<false, false, false>(
