@@ -37,6 +37,8 @@ use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::{self, Gas};
 use super::obstacles::{Obstacle, resolve, touching};
 #[cfg(target_arch = "x86_64")]
+use super::slice_update::{self, update_slice_avx2};
+#[cfg(target_arch = "x86_64")]
 use super::slice_vertices::slice_vertices_avx2;
 use super::slice_vertices::{GasTerms, RowGas, SliceGas, SliceVertices, VertexConstants, vertex_blocks};
 #[cfg(target_arch = "x86_64")]
@@ -1690,6 +1692,10 @@ pub(crate) fn substep(
     #[cfg(test)]
     let test_gain = s.test_gain;
     let members = s.team_sizer.members(pool.threads());
+    #[cfg(target_arch = "x86_64")]
+    let slice_planes = (std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma"))
+        .then(|| slice_update::planes_of(obstacles))
+        .flatten();
     let (iterations, team_stats) = pool.team_of(members, |team| {
         if !reuse {
             state_pass(team, gradient_in_team.then_some(&gas_origin[..]), false);
@@ -1835,6 +1841,12 @@ pub(crate) fn substep(
         // of a vertex reads its neighbours'); then v += Δv, friction, x += h v, and the contact
         // response (SPEC 2.3) of each vertex.
         let (restitution, friction) = (model.settings.restitution, model.settings.friction);
+        // The obstacles as planes for the slices of the last pass, with AVX2 and FMA (None:
+        // every row one at a time).
+        #[cfg(target_arch = "x86_64")]
+        let slice_planes = slice_planes.as_deref();
+        #[cfg(all(target_arch = "x86_64", test))]
+        let slice_planes = slice_planes.filter(|_| test_gain == 0.0);
         let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
         let vertex_fragment = gas_guard.as_deref().map_or(&[][..], |g| &g.vertex_fragment[..]);
         // SAFETY: with contacts there is no momentum correction, so nobody writes Δv in this
@@ -1918,16 +1930,43 @@ pub(crate) fn substep(
             let inv_mass = &model.inv_mass[first..first + n_rows];
             let (dv, slots) = (&dv[..n_rows], contact.slot.get(first..first + n_rows).unwrap_or(&[]));
             let mut all_finite = true;
-            for k in 0..n_rows {
-                let i = first + k;
-                let dvi = dv[k];
-                if inv_mass[k] == 0.0 {
-                    all_finite &= x[k].is_finite() && v[k].is_finite();
+            let mut k = 0;
+            while k < n_rows {
+                // Eight rows at once where they all move and touch nothing (`slice_update`).
+                #[cfg(target_arch = "x86_64")]
+                if let Some(planes) = slice_planes {
+                    let rows = k..k + SLICE;
+                    if k % SLICE == 0
+                        && rows.end <= n_rows
+                        && inv_mass[rows.clone()].iter().all(|&w| w > 0.0)
+                        && slots.get(rows.clone()).is_none_or(|s| s.iter().all(|&s| s == u32::MAX))
+                    {
+                        // SAFETY: AVX2 and FMA (checked with the planes); rows of the chunk.
+                        let update = unsafe { update_slice_avx2(x, v, dv, k, h, planes) };
+                        if update.inside {
+                            for r in rows {
+                                resolve(&mut x[r], &mut v[r], obstacles, restitution, friction);
+                                all_finite &= x[r].is_finite() && v[r].is_finite();
+                            }
+                        } else {
+                            all_finite &= update.finite;
+                        }
+                        k += SLICE;
+                        continue;
+                    }
+                }
+                // One row (advanced past first: the row's `continue`s go to the next).
+                let row = k;
+                k += 1;
+                let i = first + row;
+                let dvi = dv[row];
+                if inv_mass[row] == 0.0 {
+                    all_finite &= x[row].is_finite() && v[row].is_finite();
                     continue;
                 }
-                let v = &mut v[k];
+                let v = &mut v[row];
                 *v += Vec3::from(dvi);
-                if let Some(&slot) = slots.get(k).filter(|&&slot| slot != u32::MAX) {
+                if let Some(&slot) = slots.get(row).filter(|&&slot| slot != u32::MAX) {
                     let normal = contact.normal[slot as usize];
                     let delta = slip[i];
                     if delta != Vec3A::ZERO {
@@ -1969,15 +2008,15 @@ pub(crate) fn substep(
                         *v -= Vec3::from(delta * share);
                     }
                 }
-                x[k] += *v * h;
+                x[row] += *v * h;
                 #[cfg(test)]
                 {
-                    x[k] += *v * (h * test_gain);
+                    x[row] += *v * (h * test_gain);
                 }
                 if !obstacles.is_empty() {
-                    resolve(&mut x[k], v, obstacles, restitution, friction);
+                    resolve(&mut x[row], v, obstacles, restitution, friction);
                 }
-                all_finite &= x[k].is_finite() && v.is_finite();
+                all_finite &= x[row].is_finite() && v.is_finite();
             }
             finite[0] = all_finite;
         });

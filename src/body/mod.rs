@@ -28,6 +28,7 @@ mod implicit;
 mod obstacles;
 mod settings;
 mod simulator;
+mod slice_update;
 mod slice_vertices;
 mod spring_sums;
 mod spring_terms;
