@@ -24,7 +24,7 @@
 
 use glam::{Vec3, Vec3A};
 
-use super::cg_vectors::residual_rows;
+use super::cg_vectors::{initial_rows, residual_rows};
 use super::coarse::{CoarseSpace, CoarseView};
 #[cfg(target_arch = "x86_64")]
 use super::coupling_slices::load_points_transposed;
@@ -658,38 +658,6 @@ fn gas_dots_range(
     run.flush(out);
 }
 
-/// `r = rhs - A Δv`, `z = M⁻¹ r` (both filtered by the contacts) on the rows `first..` of a
-/// chunk (`ap` holds the chunk's rows of `A Δv`); returns the chunk's `r·z`.
-#[allow(clippy::too_many_arguments)]
-fn initial_chunk(
-    first: usize,
-    (r, z): (&mut [Vec3A], &mut [Vec3A]),
-    rhs: &[Vec3A],
-    ap: &[Vec3A],
-    inv_diag: &[SymmetricBlock],
-    contact: ContactRows,
-    any_contact: bool,
-) -> f64 {
-    // The chunk's rows of every array, sliced once (no bounds check per row).
-    let n = r.len();
-    let rows = first..first + n;
-    let (rhs, inv_diag, ap, z) = (&rhs[rows.clone()], &inv_diag[rows.clone()], &ap[..n], &mut z[..n]);
-    let contact = if any_contact { contact.rows(rows) } else { ContactRows::default() };
-    let mut rz = 0.0f64;
-    for k in 0..n {
-        let mut ri = rhs[k] - ap[k];
-        let mut zi = inv_diag[k].apply(ri);
-        if any_contact {
-            ri = contact.apply(k, ri);
-            zi = contact.apply(k, zi);
-        }
-        r[k] = ri;
-        z[k] = zi;
-        rz += ri.dot(zi) as f64;
-    }
-    rz
-}
-
 /// `p = z + β p` (z with the coarse correction) on the rows `first..` of a chunk, leaving the
 /// chunk's `Σ g·p` per fragment in `gas`.
 #[allow(clippy::too_many_arguments)]
@@ -1286,7 +1254,7 @@ impl Shared<'_> {
                 };
                 let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
                 product_rows(sys, contact, coupling, dv_all, &scale, &mut task);
-                sum[0] = initial_chunk(c * CHUNK, (r_rows, z_rows), rhs, task.out, inv_diag, contact, any_contact);
+                sum[0] = initial_rows(c * CHUNK, (r_rows, z_rows), rhs, task.out, inv_diag, contact, any_contact);
             });
             team.barrier();
             // SAFETY: nobody writes the chunks' sums in this pass.
