@@ -1,6 +1,6 @@
 //! The update pass of each conjugate-gradient iteration of the implicit integrator, over a chunk
 //! of rows: `Δv += α p`, `r -= α A p`, `z = M⁻¹ r` (block Jacobi, filtered by the contacts) and
-//! the sums `r·r` and `r·z`.
+//! the sums `r·r` and `r·z`; and the first residual of a solve ([`initial_rows`]).
 //!
 //! With AVX2 two rows share each 256-bit register for the vector updates and the sums (the
 //! vectors are `Vec3A`, four f32 a row), and each row's `z` is its block times `r` in SSE. One
