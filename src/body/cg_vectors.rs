@@ -230,7 +230,6 @@ unsafe fn initial_rows_avx2(
     assert!(z.len() == n && rhs.len() == n && ap.len() == n && inv_diag.len() == n);
     assert!(contact.is_empty() || contact.slot.len() == n);
     let mut rz = 0.0f64;
-    let (rp, zp) = (r.as_mut_ptr() as *mut f32, z.as_mut_ptr() as *mut f32);
     let (rhsp, app) = (rhs.as_ptr() as *const f32, ap.as_ptr() as *const f32);
     for k in (0..n & !1).step_by(2) {
         let touches = !contact.is_empty() && (contact.slot[k] != u32::MAX || contact.slot[k + 1] != u32::MAX);
@@ -239,6 +238,9 @@ unsafe fn initial_rows_avx2(
             rz += initial_row(k + 1, (r, z), rhs, ap, inv_diag, contact) as f64;
             continue;
         }
+        // (Taken here, after any row written through the slices: a pointer taken before them
+        // would not be valid after those writes.)
+        let (rp, zp) = (r.as_mut_ptr() as *mut f32, z.as_mut_ptr() as *mut f32);
         // SAFETY: rows k and k + 1 < n of each slice (eight f32), unaligned 32-byte accesses.
         let dots = unsafe {
             let at = 4 * k;

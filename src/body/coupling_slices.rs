@@ -175,7 +175,8 @@ impl CouplingGroup {
     /// instructions of a group's 50-odd.
     #[inline(always)]
     pub(super) fn set_other(&mut self, lane: usize, row: u32) {
-        debug_assert!((row as usize) < MAX_ROWS);
+        // (4 × a larger row would wrap to another row's offset.)
+        assert!((row as usize) < MAX_ROWS, "other end {row}: more than the {MAX_ROWS} rows a layout takes");
         self.other_offset[lane] = 4 * row;
     }
 }

@@ -143,6 +143,9 @@ pub(crate) struct ImplicitScratch {
     /// linearised step does (the end state is measured after it, as a real one would be).
     #[cfg(test)]
     pub test_gain: f32,
+    /// Tests: the last pass one row at a time ([`ImplicitScratch::set_rows_one_at_a_time`]).
+    #[cfg(test)]
+    rows_one_at_a_time: bool,
     /// The coarse level of the preconditioner (made on the first substep) and the substep
     /// length it was made (or tried) for.
     coarse: Option<CoarseSpace>,
@@ -192,6 +195,12 @@ impl ImplicitScratch {
     #[cfg(test)]
     pub fn run_alone_for(&mut self, substeps: u32) {
         self.team_sizer.alone_for(substeps);
+    }
+
+    /// The last pass of every substep one row at a time (no `slice_update`), or not.
+    #[cfg(test)]
+    pub fn set_rows_one_at_a_time(&mut self, one_at_a_time: bool) {
+        self.rows_one_at_a_time = one_at_a_time;
     }
 
     /// Whether the last substep prepared the next.
@@ -1664,6 +1673,8 @@ pub(crate) fn substep(
     let slice_planes = (std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma"))
         .then(|| slice_update::planes_of(obstacles))
         .flatten();
+    #[cfg(all(target_arch = "x86_64", test))]
+    let slice_planes = slice_planes.filter(|_| !s.rows_one_at_a_time);
     let (iterations, team_stats) = pool.team_of(members, |team| {
         if !reuse {
             state_pass(team, gradient_in_team.then_some(&gas_origin[..]), false);
@@ -1978,7 +1989,7 @@ pub(crate) fn substep(
                 }
                 x[row] += *v * h;
                 #[cfg(test)]
-                {
+                if test_gain != 0.0 {
                     x[row] += *v * (h * test_gain);
                 }
                 if !obstacles.is_empty() {
