@@ -267,6 +267,17 @@ mod tests {
     use super::*;
     use crate::body::symmetric_block::SymmetricParts;
 
+    /// `count` random positive definite blocks (inverted), the tests' preconditioner.
+    fn random_blocks(unit: &mut impl FnMut() -> f32, count: usize) -> Vec<SymmetricBlock> {
+        (0..count)
+            .map(|_| {
+                let mut parts = SymmetricParts { diagonal: Vec3A::splat(2.0), off: Vec3A::ZERO };
+                parts.add_outer(Vec3A::new(unit(), unit(), unit()), 1.5);
+                parts.inverse()
+            })
+            .collect()
+    }
+
     /// Random rows (an odd count, some in contact, garbage in the fourth lanes): the pass gives
     /// each row's update by its definition, and sums r·r and r·z in f64 up to rounding.
     #[test]
@@ -279,13 +290,7 @@ mod tests {
             (0..total).map(|_| Vec3A::from_vec4(glam::Vec4::new(unit(), unit(), unit(), 1e30))).collect::<Vec<_>>()
         };
         let p = vector(&mut unit);
-        let inv_diag: Vec<SymmetricBlock> = (0..total)
-            .map(|_| {
-                let mut parts = SymmetricParts { diagonal: Vec3A::splat(2.0), off: Vec3A::ZERO };
-                parts.add_outer(Vec3A::new(unit(), unit(), unit()), 1.5);
-                parts.inverse()
-            })
-            .collect();
+        let inv_diag = random_blocks(&mut unit, total);
         let normals = [Vec3A::Z, Vec3A::new(0.0, 0.6, 0.8)];
         let slot: Vec<u32> = (0..total).map(|i| if i % 5 == 1 { (i % 2) as u32 } else { u32::MAX }).collect();
         let alpha = 0.73;
@@ -330,13 +335,7 @@ mod tests {
             (0..total).map(|_| Vec3A::from_vec4(glam::Vec4::new(unit(), unit(), unit(), unit()))).collect::<Vec<_>>()
         };
         let rhs = vector(&mut unit);
-        let inv_diag: Vec<SymmetricBlock> = (0..total)
-            .map(|_| {
-                let mut parts = SymmetricParts { diagonal: Vec3A::splat(2.0), off: Vec3A::ZERO };
-                parts.add_outer(Vec3A::new(unit(), unit(), unit()), 1.5);
-                parts.inverse()
-            })
-            .collect();
+        let inv_diag = random_blocks(&mut unit, total);
         let normals = [Vec3A::Z, Vec3A::new(0.0, 0.6, 0.8)];
         let slot: Vec<u32> = (0..total).map(|i| if i % 7 == 2 { (i % 2) as u32 } else { u32::MAX }).collect();
         let ap = vector(&mut unit)[first..].to_vec();

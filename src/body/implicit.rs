@@ -713,60 +713,26 @@ fn direction_chunk(
         return;
     }
     let coarse = coarse.and_then(|(view, solution)| Some((view.rows_of(rows.clone())?, solution)));
+    let gas_rows = (fragment, slices, gradient);
     match (coarse, contact.is_empty(), fragment.is_empty()) {
-        (Some(coarse), true, true) => direction_rows::<true, false, false>(
-            p,
-            z,
-            inv_mass,
-            coarse,
-            contact,
-            (fragment, slices, gradient),
-            beta,
-            gas,
-        ),
-        (Some(coarse), true, false) => direction_rows::<true, false, true>(
-            p,
-            z,
-            inv_mass,
-            coarse,
-            contact,
-            (fragment, slices, gradient),
-            beta,
-            gas,
-        ),
-        (Some(coarse), false, true) => direction_rows::<true, true, false>(
-            p,
-            z,
-            inv_mass,
-            coarse,
-            contact,
-            (fragment, slices, gradient),
-            beta,
-            gas,
-        ),
-        (Some(coarse), false, false) => {
-            direction_rows::<true, true, true>(p, z, inv_mass, coarse, contact, (fragment, slices, gradient), beta, gas)
+        (Some(coarse), true, true) => {
+            direction_rows::<true, false, false>(p, z, inv_mass, coarse, contact, gas_rows, beta, gas)
         }
-        (None, _, true) => direction_rows::<false, false, false>(
-            p,
-            z,
-            inv_mass,
-            (&[], &[]),
-            contact,
-            (fragment, slices, gradient),
-            beta,
-            gas,
-        ),
-        (None, _, false) => direction_rows::<false, false, true>(
-            p,
-            z,
-            inv_mass,
-            (&[], &[]),
-            contact,
-            (fragment, slices, gradient),
-            beta,
-            gas,
-        ),
+        (Some(coarse), true, false) => {
+            direction_rows::<true, false, true>(p, z, inv_mass, coarse, contact, gas_rows, beta, gas)
+        }
+        (Some(coarse), false, true) => {
+            direction_rows::<true, true, false>(p, z, inv_mass, coarse, contact, gas_rows, beta, gas)
+        }
+        (Some(coarse), false, false) => {
+            direction_rows::<true, true, true>(p, z, inv_mass, coarse, contact, gas_rows, beta, gas)
+        }
+        (None, _, true) => {
+            direction_rows::<false, false, false>(p, z, inv_mass, (&[], &[]), contact, gas_rows, beta, gas)
+        }
+        (None, _, false) => {
+            direction_rows::<false, false, true>(p, z, inv_mass, (&[], &[]), contact, gas_rows, beta, gas)
+        }
     }
 }
 
