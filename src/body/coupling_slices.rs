@@ -3,8 +3,9 @@
 //!
 //! Rows (vertices) go in slices of [`SLICE`] consecutive rows. A slice holds as many groups as
 //! its longest row has couplings; group `k` of a slice holds the `k`-th coupling of each of its
-//! rows, one row per lane, as structure of arrays (`w` by axis, `alpha`, the other end). A
-//! product then sums eight rows at once in 256-bit registers with no horizontal additions.
+//! rows, one row per lane, as structure of arrays (per lane the block's two packed words and the
+//! other end's offset, [`CouplingGroup`]). A product then sums eight rows at once in 256-bit
+//! registers with no horizontal additions.
 //! On the issue-5 balloon's matrix (10,242 rows, 61,440 couplings, icosahedral valence 5 and 6,
 //! so 0.07% of the lanes are padding), one thread, inside the solve, the same product repeated
 //! 200 times: the couplings' sums take 51 µs, where rows one at a time (two couplings per
