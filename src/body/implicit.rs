@@ -143,6 +143,8 @@ pub(crate) struct ImplicitScratch {
     /// linearised step does (the end state is measured after it, as a real one would be).
     #[cfg(test)]
     pub test_gain: f32,
+    /// The obstacles as planes for the last pass's slices (`slice_update::planes_of`).
+    planes: Vec<(Vec3, Vec3)>,
     /// Tests: the last pass one row at a time ([`ImplicitScratch::set_rows_one_at_a_time`]).
     #[cfg(test)]
     rows_one_at_a_time: bool,
@@ -277,6 +279,7 @@ impl ImplicitScratch {
             + self.contact_slot.capacity() * 4
             + self.contact_normal.capacity() * 16
             + self.contact_held.capacity()
+            + self.planes.capacity() * 24
             + self.couplings.memory_bytes()
             + self.spring_terms.capacity() * std::mem::size_of::<SpringTerms>()
             + (self.gas_coef.capacity() + self.gas_dot.capacity() + self.gas_partial.capacity()) * 8
@@ -1636,9 +1639,10 @@ pub(crate) fn substep(
     let test_gain = s.test_gain;
     let members = s.team_sizer.members(pool.threads());
     #[cfg(target_arch = "x86_64")]
-    let slice_planes = (std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma"))
-        .then(|| slice_update::planes_of(obstacles))
-        .flatten();
+    let slice_planes = (std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("fma")
+        && slice_update::planes_of(obstacles, &mut s.planes))
+    .then_some(&s.planes[..]);
     #[cfg(all(target_arch = "x86_64", test))]
     let slice_planes = slice_planes.filter(|_| !s.rows_one_at_a_time);
     let (iterations, team_stats) = pool.team_of(members, |team| {
@@ -1788,8 +1792,6 @@ pub(crate) fn substep(
         let (restitution, friction) = (model.settings.restitution, model.settings.friction);
         // The obstacles as planes for the slices of the last pass, with AVX2 and FMA (None:
         // every row one at a time).
-        #[cfg(target_arch = "x86_64")]
-        let slice_planes = slice_planes.as_deref();
         #[cfg(all(target_arch = "x86_64", test))]
         let slice_planes = slice_planes.filter(|_| test_gain == 0.0);
         let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());

@@ -12,16 +12,18 @@ use glam::{Vec3, Vec3A};
 use super::coupling_slices::{SLICE, load_points_transposed};
 use super::obstacles::Obstacle;
 
-/// The obstacles as (point, unit normal) when they are all planes (a slice's test then needs no
-/// square root), else None.
-pub(crate) fn planes_of(obstacles: &[Obstacle]) -> Option<Vec<(Vec3, Vec3)>> {
-    obstacles
-        .iter()
-        .map(|o| match *o {
-            Obstacle::Plane { point, normal } => Some((point, normal)),
-            Obstacle::Sphere { .. } => None,
-        })
-        .collect()
+/// The obstacles as (point, unit normal) into `planes` (cleared first; a buffer kept from
+/// substep to substep, so this allocates nothing once it has grown): true when they are all
+/// planes (a slice's test then needs no square root).
+pub(crate) fn planes_of(obstacles: &[Obstacle], planes: &mut Vec<(Vec3, Vec3)>) -> bool {
+    planes.clear();
+    for obstacle in obstacles {
+        match *obstacle {
+            Obstacle::Plane { point, normal } => planes.push((point, normal)),
+            Obstacle::Sphere { .. } => return false,
+        }
+    }
+    true
 }
 
 /// What [`update_slice_avx2`] found in its eight rows.
