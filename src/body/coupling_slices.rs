@@ -399,6 +399,105 @@ pub(crate) fn row_coupling_sum(offsets: &[u32], groups: &[CouplingGroup], input:
     acc
 }
 
+/// [`row_coupling_sum`] of the rows of one slice at a time, for passes that need it at scattered
+/// rows (the contact rows of the implicit integrator, twice a substep): a row's slice is summed
+/// once, eight lanes at a time with AVX2, and its other rows then come from here. Each lane's
+/// sum is [`row_coupling_sum`]'s, bit for bit (the same operations in the same order, no fused
+/// multiply-add). One scalar row took about as many instructions as a whole slice, and the
+/// contact rows lie in patches: on the issue-5 balloon these sums were 2.2% of a one-thread step.
+pub(crate) struct SliceCouplingSums {
+    /// The slice summed (`usize::MAX`: none yet).
+    slice: usize,
+    sums: [Vec3A; SLICE],
+}
+
+impl Default for SliceCouplingSums {
+    fn default() -> Self {
+        Self { slice: usize::MAX, sums: [Vec3A::ZERO; SLICE] }
+    }
+}
+
+impl SliceCouplingSums {
+    /// `row_coupling_sum(offsets, groups, input, row)`, summing `row`'s whole slice when it is
+    /// not the last one asked for. Every call with one `SliceCouplingSums` must pass the same
+    /// couplings and input. Panics if an other end is not a row of `input`.
+    #[inline]
+    pub fn row(&mut self, offsets: &[u32], groups: &[CouplingGroup], input: &[Vec3A], row: usize) -> Vec3A {
+        let slice = row / SLICE;
+        if slice != self.slice {
+            self.sums = slice_coupling_sums(offsets, groups, input, slice);
+            self.slice = slice;
+        }
+        self.sums[row % SLICE]
+    }
+}
+
+/// [`row_coupling_sum`] of each row of slice `slice` (zero for lanes past the last row of
+/// `input`). Panics if an other end is not a row of `input`.
+fn slice_coupling_sums(offsets: &[u32], groups: &[CouplingGroup], input: &[Vec3A], slice: usize) -> [Vec3A; SLICE] {
+    let first = slice * SLICE;
+    #[cfg(target_arch = "x86_64")]
+    if first + SLICE <= input.len() && std::arch::is_x86_feature_detected!("avx2") {
+        let groups = &groups[offsets[slice] as usize..offsets[slice + 1] as usize];
+        // SAFETY: the processor has AVX2 (checked above); rows first..first + 8 are rows of
+        // `input`.
+        return unsafe { slice_coupling_sums_avx2(groups, input, first) };
+    }
+    std::array::from_fn(|lane| {
+        let row = first + lane;
+        if row < input.len() { row_coupling_sum(offsets, groups, input, row) } else { Vec3A::ZERO }
+    })
+}
+
+/// [`slice_coupling_sums`] of a whole slice (its `groups`, its rows from `first`) with AVX2.
+///
+/// # Safety
+/// The processor must have AVX2; `first + 8 <= input.len()`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn slice_coupling_sums_avx2(groups: &[CouplingGroup], input: &[Vec3A], first: usize) -> [Vec3A; SLICE] {
+    use std::arch::x86_64::*;
+    // The largest offset a row's four f32 can start at.
+    let limit = _mm256_set1_epi32((4 * (input.len() - 1)).min(u32::MAX as usize) as u32 as i32);
+    let upper = _mm256_set1_epi32(0xFFFF_0000_u32 as i32);
+    // SAFETY: rows first..first + 8 (the caller's contract).
+    let (xx, xy, xz) = unsafe { load_rows_transposed(input, first) };
+    let (mut ax, mut ay, mut az) = (_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps());
+    for group in groups {
+        // SAFETY: `other_offset`, `xy` and `za` are 32 aligned bytes (offsets 64, 0 and 32 of a
+        // 32-byte aligned group).
+        let (other, xy_words, za_words) = unsafe {
+            (
+                _mm256_load_si256(group.other_offset.as_ptr() as *const __m256i),
+                _mm256_load_si256(group.xy.as_ptr() as *const __m256i),
+                _mm256_load_si256(group.za.as_ptr() as *const __m256i),
+            )
+        };
+        let inside = _mm256_cmpeq_epi32(_mm256_max_epu32(other, limit), limit);
+        assert!(_mm256_movemask_epi8(inside) == -1, "a coupling's other end is not a row");
+        let wx = _mm256_castsi256_ps(_mm256_slli_epi32::<16>(xy_words));
+        let wy = _mm256_castsi256_ps(_mm256_and_si256(xy_words, upper));
+        let wz = _mm256_castsi256_ps(_mm256_slli_epi32::<16>(za_words));
+        let alpha = _mm256_castsi256_ps(_mm256_and_si256(za_words, upper));
+        // SAFETY: every other end's four f32 are in `input` (checked above).
+        let (px, py, pz) = unsafe { load_transposed(input, &group.other_offset) };
+        let (dx, dy, dz) = (_mm256_sub_ps(xx, px), _mm256_sub_ps(xy, py), _mm256_sub_ps(xz, pz));
+        // `row_coupling_sum`'s operations: s = wx dx + wy dy + wz dz, acc += alpha d + w s.
+        let s = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(wx, dx), _mm256_mul_ps(wy, dy)), _mm256_mul_ps(wz, dz));
+        ax = _mm256_add_ps(ax, _mm256_add_ps(_mm256_mul_ps(alpha, dx), _mm256_mul_ps(wx, s)));
+        ay = _mm256_add_ps(ay, _mm256_add_ps(_mm256_mul_ps(alpha, dy), _mm256_mul_ps(wy, s)));
+        az = _mm256_add_ps(az, _mm256_add_ps(_mm256_mul_ps(alpha, dz), _mm256_mul_ps(wz, s)));
+    }
+    let (mut sx, mut sy, mut sz) = ([0f32; SLICE], [0f32; SLICE], [0f32; SLICE]);
+    // SAFETY: eight f32 into each local array.
+    unsafe {
+        _mm256_storeu_ps(sx.as_mut_ptr(), ax);
+        _mm256_storeu_ps(sy.as_mut_ptr(), ay);
+        _mm256_storeu_ps(sz.as_mut_ptr(), az);
+    }
+    std::array::from_fn(|lane| Vec3A::new(sx[lane], sy[lane], sz[lane]))
+}
+
 /// Eight `Vec3A` rows of `input` (from the f32 at `offsets[lane]`: 4 × the row), as their x, y
 /// and z lanes.
 ///
@@ -935,6 +1034,15 @@ mod tests {
             let want: Vec3A = row.iter().map(|&(c, j)| c.rounded().apply(input[i] - input[j as usize])).sum();
             let got = row_coupling_sum(&slices.offsets, &slices.groups, &input, i);
             assert!((got - want).length() <= 1e-5 * (1.0 + row.len() as f32 * 40.0), "row {i}: {got} vs {want}");
+        }
+        // By slices (eight lanes at once where the processor has AVX2 and the slice is whole),
+        // asked in an order that goes back to slices summed before: the rows' sums, bit for bit.
+        let mut sums = SliceCouplingSums::default();
+        let order = (0..n).step_by(3).chain((0..n).rev().step_by(2)).chain(0..n);
+        for i in order {
+            let want = row_coupling_sum(&slices.offsets, &slices.groups, &input, i);
+            let got = sums.row(&slices.offsets, &slices.groups, &input, i);
+            assert_eq!(got.to_array().map(f32::to_bits), want.to_array().map(f32::to_bits), "row {i} by slices");
         }
         let mass: Vec<f32> = (0..n).map(|_| 0.5 + unit().abs()).collect();
         let inv_mass: Vec<f32> = (0..n).map(|i| if i % 13 == 5 { 0.0 } else { 1.0 / mass[i] }).collect();

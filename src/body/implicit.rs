@@ -29,8 +29,8 @@ use super::coarse::{CoarseSpace, CoarseView};
 #[cfg(target_arch = "x86_64")]
 use super::coupling_slices::load_points_transposed;
 use super::coupling_slices::{
-    CheckedCouplings, CouplingGroup, CouplingSlices, RowTerms, SLICE, SliceRowsMut, group_range, product_slices,
-    row_coupling_sum,
+    CheckedCouplings, CouplingGroup, CouplingSlices, RowTerms, SLICE, SliceCouplingSums, SliceRowsMut, group_range,
+    product_slices,
 };
 use super::energy::{self, SpringEnergyLanes};
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
@@ -379,18 +379,20 @@ impl System<'_> {
 
 /// The normal reaction `λ = n·(A Δv - rhs)_i` an obstacle gave row i in the solve (positive
 /// when it pushed: the constraint's force along its normal, Baraff and Witkin's multiplier):
-/// the row's mass and couplings ([`row_coupling_sum`], the product's sums) and its gas term
-/// `g_i (h² P/V Σ g·Δv)` (`gas`: `g_i` and the fragment's [`gas_scale`]).
+/// the row's mass and couplings (`coupling_sum`: the row's [`row_coupling_sum`] of Δv, the
+/// product's sums) and its gas term `g_i (h² P/V Σ g·Δv)` (`gas`: `g_i` and the fragment's
+/// [`gas_scale`]).
+///
+/// [`row_coupling_sum`]: super::coupling_slices::row_coupling_sum
 fn contact_reaction(
     mass: f32,
-    (offsets, groups): (&[u32], &[CouplingGroup]),
-    dv: &[Vec3A],
-    i: usize,
+    dv: Vec3A,
+    coupling_sum: Vec3A,
     rhs: Vec3A,
     gas: Option<(Vec3A, f32)>,
     normal: Vec3A,
 ) -> f32 {
-    let mut row = dv[i] * mass + row_coupling_sum(offsets, groups, dv, i);
+    let mut row = dv * mass + coupling_sum;
     if let Some((g, scale)) = gas {
         row += g * scale;
     }
@@ -1821,6 +1823,7 @@ pub(crate) fn substep(
                 };
                 held.fill(false);
                 slip.fill(Vec3A::ZERO);
+                let mut coupling_sums = SliceCouplingSums::default();
                 for (k, i) in rows.clone().enumerate() {
                     let Some(&slot) = contact.slot.get(i).filter(|&&slot| slot != u32::MAX) else { continue };
                     if model.inv_mass[i] == 0.0 {
@@ -1831,7 +1834,8 @@ pub(crate) fn substep(
                         .get(i)
                         .filter(|&&f| f != u32::MAX)
                         .map(|&f| (Vec3A::from(gradient[i]), end_gas_scale[f as usize]));
-                    let lambda = contact_reaction(model.mass[i], coupling, dv_all, i, rhs[i], gas, normal);
+                    let coupling_sum = coupling_sums.row(coupling.0, coupling.1, dv_all, i);
+                    let lambda = contact_reaction(model.mass[i], dv_all[i], coupling_sum, rhs[i], gas, normal);
                     held[k] = lambda >= 0.0;
                     reaction[slot as usize - rows.start] = lambda;
                     if lambda > 0.0 && friction > 0.0 {
@@ -1877,6 +1881,8 @@ pub(crate) fn substep(
             let inv_mass = &model.inv_mass[first..first + n_rows];
             let (dv, slots) = (&dv[..n_rows], contact.slot.get(first..first + n_rows).unwrap_or(&[]));
             let mut all_finite = true;
+            // The friction's sums of the rows' slip (a contact's slices at once).
+            let mut slip_sums = SliceCouplingSums::default();
             let mut k = 0;
             while k < n_rows {
                 // Eight rows at once where they all move and touch nothing (`slice_update`).
@@ -1948,7 +1954,7 @@ pub(crate) fn substep(
                         // The patch now slides until its stress is inside the cone, which costs
                         // iterations after the impact: 5.9 -> 7.5 a step for the drop
                         // (9.5 since `HELD_PULL_SHARE`, against 7.2 with friction 0).
-                        let mut needed = delta * model.mass[i] + row_coupling_sum(coupling_offsets, couplings, slip, i);
+                        let mut needed = delta * model.mass[i] + slip_sums.row(coupling_offsets, couplings, slip, i);
                         needed -= normal * needed.dot(normal);
                         let (needed, allowed) = (needed.length(), friction * reaction[slot as usize]);
                         let share = if needed <= allowed { 1.0 } else { allowed / needed };
