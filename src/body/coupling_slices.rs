@@ -563,7 +563,7 @@ pub(crate) fn transpose_rows(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-unsafe fn load_rows_transposed(
+pub(crate) unsafe fn load_rows_transposed(
     input: &[Vec3A],
     first: usize,
 ) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256, std::arch::x86_64::__m256) {

@@ -38,9 +38,9 @@ use super::gas::{self, Gas};
 use super::obstacles::{Obstacle, resolve, touching};
 #[cfg(target_arch = "x86_64")]
 use super::slice_update::{self, update_slice_avx2};
-#[cfg(target_arch = "x86_64")]
-use super::slice_vertices::slice_vertices_avx2;
 use super::slice_vertices::{GasTerms, RowGas, SliceGas, SliceVertices, VertexConstants, vertex_blocks};
+#[cfg(target_arch = "x86_64")]
+use super::slice_vertices::{free_slice_start_avx2, slice_vertices_avx2};
 #[cfg(target_arch = "x86_64")]
 use super::spring_sums::slice_spring_sums_avx2;
 use super::spring_sums::{SliceSums, row_spring_sums};
@@ -199,7 +199,8 @@ impl ImplicitScratch {
         self.team_sizer.alone_for(substeps);
     }
 
-    /// The last pass of every substep one row at a time (no `slice_update`), or not.
+    /// The start of the solve and the last pass of every substep one row at a time (no
+    /// `free_slice_start_avx2`, no `slice_update`), or not.
     #[cfg(test)]
     pub fn set_rows_one_at_a_time(&mut self, one_at_a_time: bool) {
         self.rows_one_at_a_time = one_at_a_time;
@@ -341,6 +342,10 @@ const CG_FORCE_TOLERANCE: f64 = 1e-4;
 /// smooths it at h = 1/60 s.
 const HELD_PULL_SHARE: f32 = 0.1;
 
+/// A moving vertex within this distance of an obstacle's surface (or behind it) starts the
+/// solve on it (`start_vertex`).
+const TOUCH_MARGIN: f32 = 1e-6;
+
 /// Vertices per parallel chunk (fixed, so the result does not depend on the thread count; whole
 /// slices of the coupling layout).
 const CHUNK: usize = 1024;
@@ -427,6 +432,10 @@ struct AssemblyInput<'a> {
     force: &'a [Vec3],
     gas_dot_v: &'a [f64],
     obstacles: &'a [Obstacle],
+    /// The obstacles as planes where they all are, with AVX2 and FMA (`slice_update::planes_of`):
+    /// then the rows of a slice that all move and touch none start eight at a time
+    /// ([`free_slice_start_avx2`]).
+    planes: Option<&'a [(Vec3, Vec3)]>,
 }
 
 /// The assembly of a chunk of vertices; returns its `Σ magnitude²`, `Σ |rhs|²` and whether a
@@ -459,7 +468,7 @@ unsafe fn assemble_chunk_avx2_fma(input: &AssemblyInput, t: AssemblyTask) -> (f6
 /// ([`slice_vertices_avx2`]: the same bits), else row by row.
 #[inline(always)]
 fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTask) -> (f64, f64, bool) {
-    let AssemblyInput { sys, terms, force, gas_dot_v, obstacles } = *input;
+    let AssemblyInput { sys, terms, force, gas_dot_v, obstacles, planes } = *input;
     let model = sys.model;
     let mut t = t;
     t.gas.fill(0.0);
@@ -478,7 +487,8 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
         gravity_length: model.settings.gravity.length(),
         stiffness: model.settings.spring_stiffness,
     };
-    for k in 0..rows {
+    let mut k = 0;
+    while k < rows {
         let i = t.first + k;
         let lane = i % SLICE;
         if slices && lane == 0 {
@@ -493,6 +503,40 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
             }
             #[cfg(not(target_arch = "x86_64"))]
             unreachable!("{groups:?}");
+            // The eight rows at once where they all move and touch nothing: each starts from its
+            // warm start, free (`start_vertex`), and adds its terms to the sums in row order.
+            #[cfg(target_arch = "x86_64")]
+            if let (Some(vertices), Some(planes)) = (&slice_vertices, planes)
+                && model.inv_mass[i..i + SLICE].iter().all(|&w| w > 0.0)
+            {
+                let rows = k..k + SLICE;
+                let gradient = if sys.slice_fragment.is_empty() || sys.slice_fragment[i / SLICE] == u32::MAX {
+                    &[][..]
+                } else {
+                    sys.gradient
+                };
+                // SAFETY: AVX2 and FMA (`planes` is given only with them); the slice's rows are
+                // rows of the chunk (`slice_vertices` is made only then) and of x and the gradient.
+                let start = unsafe {
+                    free_slice_start_avx2(vertices, sys.x, gradient, &t.dv[rows.clone()], i, planes, TOUCH_MARGIN)
+                };
+                if let Some(start) = start {
+                    t.rhs[rows.clone()].copy_from_slice(&vertices.rhs);
+                    t.inv_diag[rows.clone()].copy_from_slice(&vertices.inv_diag);
+                    if let Some(slots) = t.contact_slot.get_mut(rows) {
+                        slots.fill(u32::MAX);
+                    }
+                    for lane in 0..SLICE {
+                        if !gradient.is_empty() {
+                            run.add(t.gas, sys.slice_fragment[i / SLICE] as usize, start.gas_dot[lane]);
+                        }
+                        magnitude_squared += start.magnitude_squared[lane];
+                        rhs_squared += start.rhs_squared[lane];
+                    }
+                    k += SLICE;
+                    continue;
+                }
+            }
         }
         let (mut rhs, mut inv_diag, magnitude) = match &slice_vertices {
             Some(vertices) => (vertices.rhs[lane], vertices.inv_diag[lane], vertices.magnitude[lane]),
@@ -543,6 +587,7 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
         }
         magnitude_squared += (magnitude as f64) * (magnitude as f64);
         rhs_squared += rhs.length_squared() as f64;
+        k += 1;
     }
     run.flush(t.gas);
     (magnitude_squared, rhs_squared, any_contact)
@@ -594,7 +639,7 @@ fn start_vertex(
     if model.inv_mass[i] == 0.0 {
         return (Vec3A::ZERO, ContactFilter::Free);
     }
-    let Some(normal) = (!obstacles.is_empty()).then(|| touching(x, obstacles, 1e-6)).flatten() else {
+    let Some(normal) = (!obstacles.is_empty()).then(|| touching(x, obstacles, TOUCH_MARGIN)).flatten() else {
         return (guess, ContactFilter::Free);
     };
     // Released when moving away, or pulled away by its own forces unless it was held and they
@@ -1673,7 +1718,11 @@ pub(crate) fn substep(
             // SAFETY: nobody writes the sums or the terms in this pass.
             let (gas_v, terms) = unsafe { (shared.gas_v.whole(), shared.terms.whole()) };
             sum_gas_partial(gas_v, &mut gas_dot_v);
-            let assembly = AssemblyInput { sys: &sys, terms, force, gas_dot_v: &gas_dot_v, obstacles };
+            #[cfg(target_arch = "x86_64")]
+            let planes = slice_planes;
+            #[cfg(not(target_arch = "x86_64"))]
+            let planes = None;
+            let assembly = AssemblyInput { sys: &sys, terms, force, gas_dot_v: &gas_dot_v, obstacles, planes };
             // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner (per
             // vertex the springs are stiff along the surface and soft across it, which a diagonal
             // (per axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can),
