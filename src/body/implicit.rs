@@ -1409,6 +1409,7 @@ pub(crate) fn substep(
     mut gas: Option<&mut Gas>,
     x: &mut [Vec3],
     v: &mut [Vec3],
+    save: Option<(&mut [Vec3], &mut [Vec3])>,
     h: f32,
     max_iterations: usize,
     pool: &WorkerPool,
@@ -1416,6 +1417,15 @@ pub(crate) fn substep(
     s: &mut ImplicitScratch,
 ) -> (f64, usize) {
     let n = x.len();
+    // The state to roll back to, copied by the assembly's chunks (before anything changes it).
+    let saving = save.is_some();
+    let (save_x, save_v) = match save {
+        Some((save_x, save_v)) => {
+            assert!(save_x.len() == n && save_v.len() == n, "the saved state's arrays are not one per vertex");
+            (SharedSlice::new(save_x), SharedSlice::new(save_v))
+        }
+        None => (SharedSlice::new(&mut [][..]), SharedSlice::new(&mut [][..])),
+    };
     // Set again by the last pass (a substep that does not reach it leaves the step to check).
     s.all_finite = false;
     s.size_buffers(model, n);
@@ -1729,6 +1739,14 @@ pub(crate) fn substep(
             // then the start of the solve (warm start, contacts).
             team.claim(chunks, |c| {
                 let rows = rows(c);
+                if saving {
+                    // SAFETY: this member's chunk of the saved state; nobody writes x and v in
+                    // this pass.
+                    unsafe {
+                        save_x.part(rows.clone()).copy_from_slice(&sys.x[rows.clone()]);
+                        save_v.part(rows.clone()).copy_from_slice(&sys.v[rows.clone()]);
+                    }
+                }
                 let (first, end) = (rows.start, rows.end);
                 let groups = group_range(shared.coupling_offsets, first..end);
                 let has_contact = !obstacles.is_empty();

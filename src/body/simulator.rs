@@ -724,8 +724,17 @@ impl Body {
         let started = Instant::now();
         let substeps = self.settings.substeps.max(1);
         let h = self.settings.time_step / substeps as f32;
-        self.saved_x.clone_from(&self.nodes.x);
-        self.saved_v.clone_from(&self.nodes.v);
+        // The state to roll back to. The implicit integrator copies it in its first substep's
+        // first parallel pass (two arrays of 123 KB on the issue-5 balloon: a copy here, on one
+        // thread, was about 1% of a one-thread step and all of it on the two threads' path).
+        let saved_by_substep = matches!(self.scratch, Scratch::Implicit(_));
+        if saved_by_substep {
+            self.saved_x.resize(self.nodes.len(), Vec3::ZERO);
+            self.saved_v.resize(self.nodes.len(), Vec3::ZERO);
+        } else {
+            self.saved_x.clone_from(&self.nodes.x);
+            self.saved_v.clone_from(&self.nodes.v);
+        }
         // The energies of the last step's end hold until something changes the state (a pin, an
         // impulse, a rolled-back step); so does what the implicit integrator prepared with them.
         if self.energy_now.is_none() {
@@ -745,11 +754,11 @@ impl Body {
         let mut clamped = false;
         let mut diverged = None;
         let mut after = before;
-        for _ in 0..substeps {
+        for substep in 0..substeps {
             // The gas measured at the start of the substep (the implicit integrator measures the
             // state it ends in, for the next one), and below at its end.
             clamped |= self.gas.as_ref().is_some_and(|g| g.clamped);
-            let (w, it) = self.substep(h);
+            let (w, it) = self.substep(h, saved_by_substep && substep == 0);
             work += w;
             iterations += it as u64;
             clamped |= self.gas.as_ref().is_some_and(|g| g.clamped);
@@ -944,7 +953,9 @@ impl Body {
         Ok(stats)
     }
 
-    fn substep(&mut self, h: f32) -> (f64, usize) {
+    /// One substep; with `save`, the implicit integrator copies the state it starts from into
+    /// `saved_x` and `saved_v` (sized already).
+    fn substep(&mut self, h: f32, save: bool) -> (f64, usize) {
         // Work of the wind over the substep: its force at the start times the displacement.
         if self.settings.drag > 0.0 {
             self.wind_start.clone_from(&self.nodes.x);
@@ -954,7 +965,7 @@ impl Body {
                 DragState { x: &self.nodes.x, v: &self.nodes.v, triangles: &self.triangles, mass: &self.nodes.mass, h };
             add_wind(&state, self.settings.wind, self.settings.drag, &mut self.wind_force);
         }
-        let (_, iterations) = self.integrate(h);
+        let (_, iterations) = self.integrate(h, save);
         let work = if self.settings.drag > 0.0 {
             self.wind_force
                 .iter()
@@ -967,9 +978,10 @@ impl Body {
         (work, iterations)
     }
 
-    fn integrate(&mut self, h: f32) -> (f64, usize) {
+    fn integrate(&mut self, h: f32, save: bool) -> (f64, usize) {
         let model = model_of!(self);
         let (x, v) = (&mut self.nodes.x, &mut self.nodes.v);
+        let save = save.then_some((&mut self.saved_x[..], &mut self.saved_v[..]));
         let gas = self.gas.as_mut();
         let result = match &mut self.scratch {
             Scratch::Explicit(s) => {
@@ -977,7 +989,7 @@ impl Body {
             }
             Scratch::Implicit(s) => {
                 let max_iterations = (10 * self.settings.iterations as usize).max(40);
-                implicit::substep(&model, gas, x, v, h, max_iterations, &self.pool, &self.obstacles, s)
+                implicit::substep(&model, gas, x, v, save, h, max_iterations, &self.pool, &self.obstacles, s)
             }
             Scratch::Xpbd(s) => (xpbd::substep(&model, gas, x, v, h, self.settings.iterations, &self.obstacles, s), 0),
         };
