@@ -200,7 +200,8 @@ impl ImplicitScratch {
     }
 
     /// The start of the solve and the last pass of every substep one row at a time (no
-    /// `free_slice_start_avx2`, no `slice_update`), or not.
+    /// `free_slice_start_avx2`, no `slice_update`), and the state pass's `Σ g·v` in a pass of
+    /// its own, or not.
     #[cfg(test)]
     pub fn set_rows_one_at_a_time(&mut self, one_at_a_time: bool) {
         self.rows_one_at_a_time = one_at_a_time;
@@ -1594,6 +1595,11 @@ pub(crate) fn substep(
     // finishes the volumes, pressures and gas coefficients, and only `Σ g·v` waits for that.
     // (The gas and the spring terms were two passes: one barrier more, and each pass ended
     // with a member waiting for the other's last chunk.)
+    // (Tests: `Σ g·v` in a pass of its own, as with caps, with the rows one at a time.)
+    #[cfg(test)]
+    let separate_dots = s.rows_one_at_a_time;
+    #[cfg(not(test))]
+    let separate_dots = false;
     let state_pass = |team: &Team, origin: Option<&[glam::DVec3]>, energies: bool| {
         // SAFETY: nobody writes x and v in this pass.
         let (x, v) = unsafe { (xs.whole(), vs.whole()) };
@@ -1622,6 +1628,13 @@ pub(crate) fn substep(
             let (out, gradient) = unsafe { (shared.gas_v.part(c * fragments..(c + 1) * fragments), gradient.whole()) };
             gas_dots_range((vertex_fragment, gradient), rows(c), |i| Vec3A::from(v[i]), out);
         };
+        // Without caps with gas (holes) the gradient chunks are final where they are made, and
+        // each takes its `Σ g·v` along (a pass and a barrier fewer); the caps add to the
+        // gradient after every chunk is made (`Gas::finish_gradient`).
+        let dots_with_gradient = origin.is_some() && fragments > 0 && !separate_dots && {
+            let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+            guard.as_deref().is_some_and(|gas| gas.caps.iter().all(|cap| gas.n_rt[cap.fragment as usize] <= 0.0))
+        };
         {
             let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
             let gas = guard.as_deref();
@@ -1648,7 +1661,17 @@ pub(crate) fn substep(
                 if c < gradient_chunks {
                     if let (Some(gas), Some(origin)) = (gas, origin) {
                         // SAFETY: this member's chunk of the gradient.
-                        gas.gradient_rows(x, origin, c * CHUNK, unsafe { gradient.part(rows(c)) });
+                        let part = unsafe { gradient.part(rows(c)) };
+                        gas.gradient_rows(x, origin, c * CHUNK, part);
+                        if dots_with_gradient {
+                            // No cap adds to it: the chunk's gradient is final, so its `Σ g·v`
+                            // too (the operations of `gas_dots`, on the chunk's rows).
+                            // SAFETY: this chunk's sums, written by this member alone.
+                            let out = unsafe { shared.gas_v.part(c * fragments..(c + 1) * fragments) };
+                            let first = c * CHUNK;
+                            let fragment = &gas.vertex_fragment[rows(c)];
+                            gas_dots_range((fragment, part), 0..part.len(), |k| Vec3A::from(v[first + k]), out);
+                        }
                     }
                     return;
                 }
@@ -1686,10 +1709,12 @@ pub(crate) fn substep(
                 }
             }
             team.barrier();
-            let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
-            team.claim(gas_chunks, |c| gas_dots(guard.as_deref(), c));
-            drop(guard);
-            team.barrier();
+            if !dots_with_gradient {
+                let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
+                team.claim(gas_chunks, |c| gas_dots(guard.as_deref(), c));
+                drop(guard);
+                team.barrier();
+            }
         }
     };
     #[cfg(test)]

@@ -1338,10 +1338,11 @@ mod tests {
     }
 
     /// The start of the solve and the last pass of a substep with slices of eight rows at once
-    /// (`slice_vertices::free_slice_start_avx2`, `slice_update`) give the same bits as one row at
-    /// a time: a ball dropped on the ground (contact rows, slices touching or going into the
-    /// ground, the rest on the fast paths), a few of its vertices pinned once it is there, then
-    /// the same with a sphere obstacle (every row one at a time).
+    /// (`slice_vertices::free_slice_start_avx2`, `slice_update`), and the gas's `Σ g·v` taken
+    /// with the gradient's chunks, give the same bits as one row at a time and that sum in a
+    /// pass of its own: a ball dropped on the ground (contact rows, slices touching or going
+    /// into the ground, the rest on the fast paths), a few of its vertices pinned once it is
+    /// there, then the same with a sphere obstacle (every row one at a time).
     #[test]
     fn the_last_pass_by_slices_steps_to_the_same_bits() {
         for sphere in [false, true] {
