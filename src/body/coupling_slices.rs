@@ -636,9 +636,22 @@ pub(crate) struct CheckedCouplings<'a> {
 }
 
 impl<'a> CheckedCouplings<'a> {
-    /// Panics if an other end is not below `rows`.
+    /// Panics if an other end is not below `rows` (the tests' way; the implicit integrator
+    /// finds the largest offset in its assembly, [`CheckedCouplings::with_largest`]).
+    #[cfg(test)]
     pub fn new(offsets: &'a [u32], groups: &'a [CouplingGroup], rows: usize) -> Self {
-        let largest = largest_other_offset(groups);
+        // SAFETY: the largest offset of these very groups.
+        unsafe { Self::with_largest(offsets, groups, rows, largest_other_offset(groups)) }
+    }
+
+    /// [`CheckedCouplings::new`] with the groups' largest other-end offset found by the caller
+    /// ([`largest_other_offset`] of parts that cover them: the implicit assembly takes it from
+    /// each chunk's groups while they are in the cache, where each member of a team scanned all
+    /// of them again). Panics if it is not below `rows`.
+    ///
+    /// # Safety
+    /// `largest` must be at least every other-end offset of `groups`.
+    pub unsafe fn with_largest(offsets: &'a [u32], groups: &'a [CouplingGroup], rows: usize, largest: u32) -> Self {
         // (The product loads 16 bytes from each offset, so a row's four f32 must all be there.)
         assert!(groups.is_empty() || largest as usize + 4 <= 4 * rows, "a coupling's other end is not a row");
         Self { offsets, groups, rows }
@@ -650,7 +663,7 @@ impl<'a> CheckedCouplings<'a> {
 /// per lane (an unsigned maximum of packed u32 is not in x86-64's baseline SSE2), and each
 /// member of a team checks all the groups once per substep: on the issue-5 balloon that took
 /// about 0.9% of a one-thread step (`perf`), as long on each member of two.
-fn largest_other_offset(groups: &[CouplingGroup]) -> u32 {
+pub(crate) fn largest_other_offset(groups: &[CouplingGroup]) -> u32 {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2 (checked just above).

@@ -30,7 +30,7 @@ use super::coarse::{CoarseSpace, CoarseView};
 use super::coupling_slices::load_points_transposed;
 use super::coupling_slices::{
     CheckedCouplings, CouplingGroup, CouplingSlices, RowTerms, SLICE, SliceCouplingSums, SliceRowsMut, group_range,
-    product_slices,
+    largest_other_offset, product_slices,
 };
 use super::energy::{self, SpringEnergyLanes};
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
@@ -197,6 +197,14 @@ impl ImplicitScratch {
     #[cfg(test)]
     pub fn run_alone_for(&mut self, substeps: u32) {
         self.team_sizer.alone_for(substeps);
+    }
+
+    /// The largest other-end offset the last assembly found over its chunks (what the solve
+    /// checked), and that of all the coupling groups.
+    #[cfg(test)]
+    pub fn largest_other_offsets(&self) -> (u32, u32) {
+        let found = self.sums.largest_other.iter().copied().max().unwrap_or(0);
+        (found, largest_other_offset(&self.couplings.groups))
     }
 
     /// The start of the solve and the last pass of every substep one row at a time (no
@@ -1028,6 +1036,7 @@ struct Shared<'a> {
     chunk_magnitude: SharedSlice<'a, f64>,
     chunk_rhs: SharedSlice<'a, f64>,
     chunk_contact: SharedSlice<'a, bool>,
+    chunk_largest_other: SharedSlice<'a, u32>,
     /// The coarse level: what every member reads, the restricted residual and the solution (in
     /// the factor's row order) and the parts of `r·z` of the two halves of the top dissection
     /// and of its separator.
@@ -1048,6 +1057,8 @@ struct ChunkSums {
     magnitude: Vec<f64>,
     rhs: Vec<f64>,
     contact: Vec<bool>,
+    /// The largest other-end offset of the chunk's coupling groups (for [`CheckedCouplings`]).
+    largest_other: Vec<u32>,
     /// Whether every position and velocity of the chunk is finite after the last pass.
     finite: Vec<bool>,
     /// Per chunk of `energy::SPRING_CHUNK` springs its energy and largest strain, per chunk of
@@ -1071,6 +1082,8 @@ impl ChunkSums {
         }
         self.contact.clear();
         self.contact.resize(chunks, false);
+        self.largest_other.clear();
+        self.largest_other.resize(chunks, 0);
         self.finite.clear();
         self.finite.resize(chunks, false);
         self.gas_v.clear();
@@ -1090,6 +1103,7 @@ impl ChunkSums {
             + self.gas_six_v.capacity())
             * 8
             + self.contact.capacity()
+            + self.largest_other.capacity() * 4
             + self.finite.capacity()
             + self.end_springs.capacity() * 16
             + self.end_vertices.capacity() * 16
@@ -1565,6 +1579,7 @@ pub(crate) fn substep(
         chunk_magnitude: SharedSlice::new(&mut s.sums.magnitude),
         chunk_rhs: SharedSlice::new(&mut s.sums.rhs),
         chunk_contact: SharedSlice::new(&mut s.sums.contact),
+        chunk_largest_other: SharedSlice::new(&mut s.sums.largest_other),
         coarse: coarse_view,
         coarse_rhs: SharedSlice::new(coarse_rhs),
         coarse_solution: SharedSlice::new(coarse_solution),
@@ -1774,6 +1789,7 @@ pub(crate) fn substep(
                 }
                 let (first, end) = (rows.start, rows.end);
                 let groups = group_range(shared.coupling_offsets, first..end);
+                let chunk_groups = groups.clone();
                 let has_contact = !obstacles.is_empty();
                 // SAFETY: this member's chunks of every array the assembly writes.
                 let task = unsafe {
@@ -1796,8 +1812,10 @@ pub(crate) fn substep(
                     }
                 };
                 let (magnitude, rhs, contact) = assemble_chunk(&assembly, task);
-                // SAFETY: this chunk's sums, written by this member alone.
+                // SAFETY: this chunk's groups and sums, written by this member alone.
                 unsafe {
+                    shared.chunk_largest_other.part(c..c + 1)[0] =
+                        largest_other_offset(shared.couplings.part(chunk_groups));
                     shared.chunk_magnitude.part(c..c + 1)[0] = magnitude;
                     shared.chunk_rhs.part(c..c + 1)[0] = rhs;
                     shared.chunk_contact.part(c..c + 1)[0] = contact;
@@ -1819,7 +1837,10 @@ pub(crate) fn substep(
                 sum_gas_partial(unsafe { shared.gas.whole() }, &mut gas_dot_dv);
                 (0, any_contact, gas_scale(&sys, &gas_dot_dv))
             } else {
-                // SAFETY: as above.
+                // The chunks' groups cover them all (whole slices).
+                // SAFETY: written by nobody from here on.
+                let largest_other = unsafe { shared.chunk_largest_other.whole() }.iter().copied().max().unwrap_or(0);
+                // SAFETY: as above; every group's other ends are in the chunks' maxima.
                 let input = unsafe {
                     SolveInput {
                         sys: &sys,
@@ -1828,9 +1849,12 @@ pub(crate) fn substep(
                         } else {
                             ContactRows::default()
                         },
-                        // (Checked by each member: about 61k other ends on the issue-5
-                        // balloon, a few microseconds once per substep.)
-                        coupling: CheckedCouplings::new(shared.coupling_offsets, shared.couplings.whole(), n),
+                        coupling: CheckedCouplings::with_largest(
+                            shared.coupling_offsets,
+                            shared.couplings.whole(),
+                            n,
+                            largest_other,
+                        ),
                         rhs: shared.rhs.whole(),
                         inv_diag: shared.inv_diag.whole(),
                         any_contact,

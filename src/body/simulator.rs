@@ -1306,7 +1306,12 @@ mod tests {
     /// A gas ball (radius 1, nRT = 200, no leak) stepped by implicit Euler (which prepares each
     /// next step at the end of the last), with `settings` for the rest.
     fn implicit_gas_ball(settings: BodySettings) -> Body {
-        let mesh = sphere(3);
+        implicit_gas_ball_of(3, settings)
+    }
+
+    /// [`implicit_gas_ball`] on the icosphere of `subdivisions`.
+    fn implicit_gas_ball_of(subdivisions: u32, settings: BodySettings) -> Body {
+        let mesh = sphere(subdivisions);
         let topology = Topology::build(mesh.triangles(), mesh.positions().len());
         let settings =
             BodySettings { integrator: Integrator::ImplicitEuler, gas_amount: 200.0, leak_rate: 0.0, ..settings };
@@ -1373,6 +1378,26 @@ mod tests {
                 assert_eq!(bits(&slices), bits(&rows), "step {step}, sphere {sphere}");
             }
             assert!(slices.nodes.x.iter().any(|x| x.y < -1.1), "the ball reached the ground");
+        }
+    }
+
+    /// The solve's check of the coupling groups' other ends takes their largest offset from the
+    /// assembly's chunks: it is that of all the groups, step after step (a ball of 642 vertices
+    /// in one chunk, and the 2,562 of `implicit_gas_ball` at subdivision 4 in three).
+    #[test]
+    fn the_assembly_finds_the_largest_other_end_of_all_the_groups() {
+        for subdivisions in [3, 4] {
+            let mut body = implicit_gas_ball_of(
+                subdivisions,
+                BodySettings { ground: true, ground_height: -1.2, threads: 2, ..BodySettings::default() },
+            );
+            for step in 0..20 {
+                body.step().unwrap();
+                let Scratch::Implicit(s) = &body.scratch else { unreachable!() };
+                let (found, all) = s.largest_other_offsets();
+                assert_eq!(found, all, "step {step}, subdivision {subdivisions}");
+                assert!(all as usize + 4 <= 4 * body.nodes.len() && all > 0);
+            }
         }
     }
 
