@@ -38,7 +38,7 @@ use super::gas::{self, Gas};
 use super::obstacles::{Obstacle, resolve, touching};
 #[cfg(target_arch = "x86_64")]
 use super::slice_update::{self, update_slice_avx2};
-use super::slice_vertices::{GasTerms, RowGas, SliceGas, SliceVertices, VertexConstants, vertex_blocks};
+use super::slice_vertices::{GasTerms, RowGas, SliceGas, VertexConstants, vertex_blocks};
 #[cfg(target_arch = "x86_64")]
 use super::slice_vertices::{free_slice_start_avx2, slice_vertices_avx2};
 #[cfg(target_arch = "x86_64")]
@@ -489,7 +489,9 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
     let mut slice_sums = SliceSums::default();
     // The per-vertex part of a slice's rows at once where they can (`slice_vertices`).
     #[cfg_attr(not(target_arch = "x86_64"), allow(unused_mut))]
-    let mut slice_vertices: Option<SliceVertices> = None;
+    // (The slice's right sides and inverted blocks go into its rows of `t` at once; its force
+    // magnitudes are kept here.)
+    let mut slice_vertices: Option<[f32; SLICE]> = None;
     let constants = VertexConstants {
         h: sys.h,
         gravity: model.settings.gravity,
@@ -507,15 +509,24 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
             unsafe {
                 slice_sums =
                     slice_spring_sums_avx2(&mut t.couplings.groups[groups.clone()], &t.springs[groups], terms, i);
-                slice_vertices = slice_vertex_gas(sys, i, k + SLICE <= rows && force.is_empty(), gas_dot_v)
-                    .map(|gas| slice_vertices_avx2(&slice_sums, &model.mass[i..i + SLICE], constants, gas));
+                slice_vertices =
+                    slice_vertex_gas(sys, i, k + SLICE <= rows && force.is_empty(), gas_dot_v).map(|gas| {
+                        slice_vertices_avx2(
+                            &slice_sums,
+                            &model.mass[i..i + SLICE],
+                            constants,
+                            gas,
+                            &mut t.rhs[k..k + SLICE],
+                            &mut t.inv_diag[k..k + SLICE],
+                        )
+                    });
             }
             #[cfg(not(target_arch = "x86_64"))]
             unreachable!("{groups:?}");
             // The eight rows at once where they all move and touch nothing: each starts from its
             // warm start, free (`start_vertex`), and adds its terms to the sums in row order.
             #[cfg(target_arch = "x86_64")]
-            if let (Some(vertices), Some(planes)) = (&slice_vertices, planes)
+            if let (Some(magnitudes), Some(planes)) = (&slice_vertices, planes)
                 && model.inv_mass[i..i + SLICE].iter().all(|&w| w > 0.0)
             {
                 let rows = k..k + SLICE;
@@ -527,11 +538,11 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
                 // SAFETY: AVX2 and FMA (`planes` is given only with them); the slice's rows are
                 // rows of the chunk (`slice_vertices` is made only then) and of x and the gradient.
                 let start = unsafe {
+                    let vertices = (&t.rhs[rows.clone()], magnitudes);
                     free_slice_start_avx2(vertices, sys.x, gradient, &t.dv[rows.clone()], i, planes, TOUCH_MARGIN)
                 };
                 if let Some(start) = start {
-                    t.rhs[rows.clone()].copy_from_slice(&vertices.rhs);
-                    t.inv_diag[rows.clone()].copy_from_slice(&vertices.inv_diag);
+                    // (The right sides and inverted blocks are in place.)
                     if let Some(slots) = t.contact_slot.get_mut(rows) {
                         slots.fill(u32::MAX);
                     }
@@ -548,7 +559,7 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
             }
         }
         let (mut rhs, mut inv_diag, magnitude) = match &slice_vertices {
-            Some(vertices) => (vertices.rhs[lane], vertices.inv_diag[lane], vertices.magnitude[lane]),
+            Some(magnitudes) => (t.rhs[k], t.inv_diag[k], magnitudes[lane]),
             None => {
                 let springs = if slices {
                     slice_sums.lane(lane)

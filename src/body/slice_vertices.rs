@@ -110,16 +110,11 @@ pub(crate) fn vertex_blocks(
     (rhs, diag.inverse(), magnitude)
 }
 
-/// The eight rows' right sides (before the pins), inverted diagonal blocks and force magnitudes.
-#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-pub(crate) struct SliceVertices {
-    pub rhs: [Vec3A; SLICE],
-    pub inv_diag: [SymmetricBlock; SLICE],
-    pub magnitude: [f32; SLICE],
-}
-
 /// The eight rows of `sums` with masses `mass` (eight): for each, what [`vertex_blocks`] gives
-/// it with the force `g m (+ ∂V/∂x P)`.
+/// it with the force `g m (+ ∂V/∂x P)`: the right sides (before the pins) into `rhs` and the
+/// inverted diagonal blocks into `inv_diag` (the assembly's rows: eight each; written there
+/// directly, where a struct of the eight rows was copied there by the assembly, about 0.6% of
+/// a one-thread step on the issue-5 balloon), and the force magnitudes returned.
 ///
 /// # Safety
 /// The processor must have AVX2.
@@ -130,9 +125,11 @@ pub(crate) unsafe fn slice_vertices_avx2(
     mass: &[f32],
     constants: VertexConstants,
     gas: Option<SliceGas>,
-) -> SliceVertices {
+    rhs: &mut [Vec3A],
+    inv_diag: &mut [SymmetricBlock],
+) -> [f32; SLICE] {
     use std::arch::x86_64::*;
-    assert!(mass.len() == SLICE);
+    assert!(mass.len() == SLICE && rhs.len() == SLICE && inv_diag.len() == SLICE);
     let VertexConstants { h, gravity, gravity_length, stiffness } = constants;
     // (Intrinsics written out: one in a closure does not inherit the target feature and becomes
     // a call.)
@@ -228,20 +225,33 @@ pub(crate) unsafe fn slice_vertices_avx2(
         // SAFETY: eight f32.
         unsafe { _mm256_storeu_ps(column.as_mut_ptr(), _mm256_blendv_ps(singular_entry, regular_entry, regular)) };
     }
-    let mut rhs = [[0f32; SLICE]; 3];
     let mut magnitudes = [0f32; SLICE];
-    // SAFETY: eight f32 into each.
+    // SAFETY: eight f32.
+    unsafe { _mm256_storeu_ps(magnitudes.as_mut_ptr(), magnitude) };
+    for (lane, block) in inv_diag.iter_mut().enumerate() {
+        *block = SymmetricBlock::from_entries(columns.map(|c| c[lane]));
+    }
+    // The eight rows as Vec3A (a zero fourth lane): x y pairs and z 0 pairs, regrouped.
+    let zero = _mm256_setzero_ps();
+    let xy01 = _mm256_unpacklo_ps(rx, ry); // x0 y0 x1 y1 | x4 y4 x5 y5
+    let xy23 = _mm256_unpackhi_ps(rx, ry); // x2 y2 x3 y3 | x6 y6 x7 y7
+    let z01 = _mm256_unpacklo_ps(rz, zero); // z0 0 z1 0 | z4 0 z5 0
+    let z23 = _mm256_unpackhi_ps(rz, zero);
+    let rows_of = [
+        _mm256_shuffle_ps::<0x44>(xy01, z01), // row 0 | row 4
+        _mm256_shuffle_ps::<0xEE>(xy01, z01), // 1 | 5
+        _mm256_shuffle_ps::<0x44>(xy23, z23), // 2 | 6
+        _mm256_shuffle_ps::<0xEE>(xy23, z23), // 3 | 7
+    ];
+    let to = rhs.as_mut_ptr() as *mut f32;
+    // SAFETY: eight Vec3A (16 aligned bytes each) of `rhs` (its length asserted above).
     unsafe {
-        _mm256_storeu_ps(rhs[0].as_mut_ptr(), rx);
-        _mm256_storeu_ps(rhs[1].as_mut_ptr(), ry);
-        _mm256_storeu_ps(rhs[2].as_mut_ptr(), rz);
-        _mm256_storeu_ps(magnitudes.as_mut_ptr(), magnitude);
+        for (lane, v) in rows_of.iter().enumerate() {
+            _mm_store_ps(to.add(4 * lane), _mm256_castps256_ps128(*v));
+            _mm_store_ps(to.add(4 * (lane + 4)), _mm256_extractf128_ps::<1>(*v));
+        }
     }
-    SliceVertices {
-        rhs: std::array::from_fn(|lane| Vec3A::new(rhs[0][lane], rhs[1][lane], rhs[2][lane])),
-        inv_diag: std::array::from_fn(|lane| SymmetricBlock::from_entries(columns.map(|c| c[lane]))),
-        magnitude: magnitudes,
-    }
+    magnitudes
 }
 
 /// What the start of the solve adds up over the eight rows of a slice that all move and touch
@@ -257,8 +267,8 @@ pub(crate) struct FreeSliceStart {
     pub gas_dot: [f64; SLICE],
 }
 
-/// The start of the solve for the eight rows `first..first + 8` of a slice, from `vertices`
-/// (theirs), when none of them touches a plane of `planes` (the obstacles as
+/// The start of the solve for the eight rows `first..first + 8` of a slice, from their right
+/// sides `rhs` and force magnitudes (`slice_vertices_avx2`'s), when none of them touches a plane of `planes` (the obstacles as
 /// `slice_update::planes_of` gives them): then each one's Δv is its warm start `dv` and it is
 /// free (what the assembly's `start_vertex` gives a moving row that touches nothing), and this
 /// returns the sums' terms. None when a row is within `margin` of a plane or behind it
@@ -274,7 +284,7 @@ pub(crate) struct FreeSliceStart {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn free_slice_start_avx2(
-    vertices: &SliceVertices,
+    (rhs, magnitude): (&[Vec3A], &[f32; SLICE]),
     x: &[Vec3],
     gradient: &[Vec3],
     dv: &[Vec3A],
@@ -284,7 +294,8 @@ pub(crate) unsafe fn free_slice_start_avx2(
 ) -> Option<FreeSliceStart> {
     use super::coupling_slices::{load_points_transposed, load_rows_transposed};
     use std::arch::x86_64::*;
-    assert!(dv.len() == SLICE && first + SLICE <= x.len() && (gradient.is_empty() || first + SLICE <= gradient.len()));
+    assert!(rhs.len() == SLICE && dv.len() == SLICE);
+    assert!(first + SLICE <= x.len() && (gradient.is_empty() || first + SLICE <= gradient.len()));
     if !planes.is_empty() {
         // SAFETY: rows first..first + 8 of `x` (asserted above).
         let (px, py, pz) = unsafe { load_points_transposed(x, first) };
@@ -323,7 +334,7 @@ pub(crate) unsafe fn free_slice_start_avx2(
         }};
     }
     // SAFETY: eight rows of the local array and of `dv` (asserted above).
-    let ((rx, ry, rz), (dx, dy, dz)) = unsafe { (load_rows_transposed(&vertices.rhs, 0), load_rows_transposed(dv, 0)) };
+    let ((rx, ry, rz), (dx, dy, dz)) = unsafe { (load_rows_transposed(rhs, 0), load_rows_transposed(dv, 0)) };
     let rhs_squared = widen!(dot!((rx, ry, rz), (rx, ry, rz)));
     let gas_dot = if gradient.is_empty() {
         [0.0; SLICE]
@@ -334,7 +345,7 @@ pub(crate) unsafe fn free_slice_start_avx2(
     };
     // `(m as f64) * (m as f64)`.
     // SAFETY: eight f32.
-    let mut magnitude_squared = widen!(unsafe { _mm256_loadu_ps(vertices.magnitude.as_ptr()) });
+    let mut magnitude_squared = widen!(unsafe { _mm256_loadu_ps(magnitude.as_ptr()) });
     for m in &mut magnitude_squared {
         *m *= *m;
     }
@@ -380,27 +391,29 @@ mod tests {
                 let mut free_slices = 0;
                 for first in (0..n).step_by(SLICE) {
                     let rows = first..first + SLICE;
-                    let vertices = SliceVertices {
-                        rhs: std::array::from_fn(|_| Vec3A::new(unit(), unit(), unit()) * 3.0),
-                        inv_diag: [SymmetricBlock::default(); SLICE],
-                        magnitude: std::array::from_fn(|_| unit().abs() * 40.0),
-                    };
+                    let rhs: [Vec3A; SLICE] = std::array::from_fn(|_| Vec3A::new(unit(), unit(), unit()) * 3.0);
+                    let magnitudes: [f32; SLICE] = std::array::from_fn(|_| unit().abs() * 40.0);
                     // SAFETY: AVX2 and FMA (checked above); the rows are in x and the gradient.
                     let got = unsafe {
-                        free_slice_start_avx2(&vertices, &x, gradient, &dv[rows.clone()], first, &planes, margin)
+                        free_slice_start_avx2(
+                            (&rhs, &magnitudes),
+                            &x,
+                            gradient,
+                            &dv[rows.clone()],
+                            first,
+                            &planes,
+                            margin,
+                        )
                     };
                     let touches = rows.clone().any(|i| touching(x[i], &obstacles, margin).is_some());
                     assert_eq!(got.is_none(), touches, "slice at {first} with {} planes", planes.len());
                     let Some(got) = got else { continue };
                     free_slices += 1;
                     for (lane, i) in rows.enumerate() {
-                        let magnitude = vertices.magnitude[lane];
+                        let magnitude = magnitudes[lane];
                         let gas_dot = if with_gas { Vec3A::from(gradient[i]).dot(dv[i]) as f64 } else { 0.0 };
-                        let want = [
-                            (magnitude as f64) * (magnitude as f64),
-                            vertices.rhs[lane].length_squared() as f64,
-                            gas_dot,
-                        ];
+                        let want =
+                            [(magnitude as f64) * (magnitude as f64), rhs[lane].length_squared() as f64, gas_dot];
                         let got = [got.magnitude_squared[lane], got.rhs_squared[lane], got.gas_dot[lane]];
                         assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits), "row {i}");
                     }
@@ -468,8 +481,11 @@ mod tests {
             let terms = GasTerms::new(2.5e3 * unit() as f64, 0.4 * unit().abs() as f64, unit() as f64);
             let gas = (round % 2 == 1).then_some(SliceGas { gradient: &gradient, terms });
             #[cfg(target_arch = "x86_64")]
+            let (mut got_rhs, mut got_inv_diag) = ([Vec3A::NAN; SLICE], [SymmetricBlock::default(); SLICE]);
+            #[cfg(target_arch = "x86_64")]
             // SAFETY: the processor has AVX2 (checked above).
-            let got = unsafe { slice_vertices_avx2(&sums, &mass, constants, gas) };
+            let got_magnitude =
+                unsafe { slice_vertices_avx2(&sums, &mass, constants, gas, &mut got_rhs, &mut got_inv_diag) };
             for lane in 0..SLICE {
                 let mut force = constants.gravity * mass[lane];
                 let row_gas = gas.map(|g| {
@@ -480,13 +496,13 @@ mod tests {
                 #[cfg(target_arch = "x86_64")]
                 {
                     let bits = |v: Vec3A| v.to_array().map(f32::to_bits);
-                    assert_eq!(bits(got.rhs[lane]), bits(rhs), "round {round} lane {lane}");
+                    assert_eq!(bits(got_rhs[lane]), bits(rhs), "round {round} lane {lane}");
                     let entries = |b: SymmetricBlock| {
                         let p = b.parts();
                         [bits(p.diagonal), bits(p.off)]
                     };
-                    assert_eq!(entries(got.inv_diag[lane]), entries(inv_diag), "round {round} lane {lane}");
-                    assert_eq!(got.magnitude[lane].to_bits(), magnitude.to_bits(), "round {round} lane {lane}");
+                    assert_eq!(entries(got_inv_diag[lane]), entries(inv_diag), "round {round} lane {lane}");
+                    assert_eq!(got_magnitude[lane].to_bits(), magnitude.to_bits(), "round {round} lane {lane}");
                 }
                 if gas.is_none() {
                     // Without gas the special lanes take the fallback (the inverse of the
