@@ -719,22 +719,62 @@ fn product_rows(
     task.dot = product_slices(couplings, input, rows, &terms, task.out);
 }
 
-/// `Σ g·value(i)` over the vertices `rows`, per gas fragment (`vertex_fragment`, `gradient`),
-/// into `out`.
-fn gas_dots_range(
-    (vertex_fragment, gradient): (&[u32], &[Vec3]),
-    rows: std::ops::Range<usize>,
-    value: impl Fn(usize) -> Vec3A,
-    out: &mut [f64],
-) {
+/// `Σ g·v` per gas fragment over a chunk's rows (`first` a multiple of [`SLICE`]; `fragment`,
+/// `slice_fragment`, `gradient` and `v` hold the chunk's rows and slices) into `out`. A slice
+/// whose rows share a fragment goes eight rows at once with AVX2 and FMA, its dots summed
+/// within the slice as the direction pass sums `Σ g·p` (`direction_rows_avx2`), then added to
+/// the fragment's running sum; other rows one at a time. Row by row, each f64 addition waited
+/// for the last (about 1% of a one-thread step on the issue-5 balloon). The sums depend on
+/// which path ran (not on the thread count): the same processor always takes the same one.
+fn gas_dots_rows((fragment, slice_fragment, gradient): (&[u32], &[u32], &[Vec3]), v: &[Vec3], out: &mut [f64]) {
     out.fill(0.0);
+    let n = v.len();
+    assert!(fragment.len() == n && gradient.len() == n && slice_fragment.len() == n.div_ceil(SLICE));
+    #[cfg(target_arch = "x86_64")]
+    let slices = std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");
     let mut run = GasRun::default();
-    for i in rows {
-        if let Some(&frag) = vertex_fragment.get(i).filter(|&&f| f != u32::MAX) {
-            run.add(out, frag as usize, Vec3A::from(gradient[i]).dot(value(i)) as f64);
+    let mut k = 0;
+    while k < n {
+        #[cfg(target_arch = "x86_64")]
+        if slices && k % SLICE == 0 && k + SLICE <= n {
+            let shared = slice_fragment[k / SLICE];
+            if shared == u32::MAX {
+                k += SLICE;
+                continue;
+            }
+            if shared != gas::MIXED_FRAGMENTS {
+                // SAFETY: AVX2 and FMA (checked above); rows k..k + 8 of both arrays.
+                let sum = unsafe { slice_dot_avx2(gradient, v, k) };
+                run.add(out, shared as usize, sum);
+                k += SLICE;
+                continue;
+            }
         }
+        if fragment[k] != u32::MAX {
+            run.add(out, fragment[k] as usize, Vec3A::from(gradient[k]).dot(Vec3A::from(v[k])) as f64);
+        }
+        k += 1;
     }
     run.flush(out);
+}
+
+/// `Σ a·b` over rows `first..first + 8`: the eight dots in f32 (fused multiply-adds), widened
+/// and summed in f64 in the order of the direction pass's slice sums.
+///
+/// # Safety
+/// The processor must have AVX2 and FMA; `first + 8` rows must be in `a` and `b`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn slice_dot_avx2(a: &[Vec3], b: &[Vec3], first: usize) -> f64 {
+    use std::arch::x86_64::*;
+    assert!(first + SLICE <= a.len() && first + SLICE <= b.len());
+    // SAFETY: rows first..first + 8 of both (asserted above).
+    let ((ax, ay, az), (bx, by, bz)) = unsafe { (load_points_transposed(a, first), load_points_transposed(b, first)) };
+    let dot = _mm256_fmadd_ps(az, bz, _mm256_fmadd_ps(ay, by, _mm256_mul_ps(ax, bx)));
+    let wide =
+        _mm256_add_pd(_mm256_cvtps_pd(_mm256_castps256_ps128(dot)), _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(dot)));
+    let half = _mm_add_pd(_mm256_castpd256_pd128(wide), _mm256_extractf128_pd::<1>(wide));
+    _mm_cvtsd_f64(_mm_add_sd(half, _mm_unpackhi_pd(half, half)))
 }
 
 /// `p = z + β p` (z with the coarse correction) on the rows `first..` of a chunk, leaving the
@@ -1647,12 +1687,18 @@ pub(crate) fn substep(
         let (ks, g) = (model.settings.spring_stiffness, model.settings.gravity);
         // (The caller holds a read guard of the gas: a second read lock by the same thread may
         // panic, says std.)
+        // The rows and slices of a chunk's `rows` of the gas's per-vertex arrays.
+        fn gas_rows(gas: &Gas, rows: std::ops::Range<usize>) -> (&[u32], &[u32]) {
+            let slices = rows.start / SLICE..rows.end.div_ceil(SLICE);
+            (&gas.vertex_fragment[rows], &gas.slice_vertex_fragment[slices])
+        }
         let gas_dots = |gas: Option<&Gas>, c: usize| {
-            let vertex_fragment = gas.map_or(&[][..], |g| &g.vertex_fragment);
+            let Some(gas) = gas else { return };
             // SAFETY: this chunk's sums, written by this member alone; the gradient is written
             // by nobody in this pass.
             let (out, gradient) = unsafe { (shared.gas_v.part(c * fragments..(c + 1) * fragments), gradient.whole()) };
-            gas_dots_range((vertex_fragment, gradient), rows(c), |i| Vec3A::from(v[i]), out);
+            let (fragment, slices) = gas_rows(gas, rows(c));
+            gas_dots_rows((fragment, slices, &gradient[rows(c)]), &v[rows(c)], out);
         };
         // Without caps with gas (holes) the gradient chunks are final where they are made, and
         // each takes its `Σ g·v` along (a pass and a barrier fewer); the caps add to the
@@ -1691,12 +1737,11 @@ pub(crate) fn substep(
                         gas.gradient_rows(x, origin, c * CHUNK, part);
                         if dots_with_gradient {
                             // No cap adds to it: the chunk's gradient is final, so its `Σ g·v`
-                            // too (the operations of `gas_dots`, on the chunk's rows).
+                            // too (`gas_dots` on the chunk's rows).
                             // SAFETY: this chunk's sums, written by this member alone.
                             let out = unsafe { shared.gas_v.part(c * fragments..(c + 1) * fragments) };
-                            let first = c * CHUNK;
-                            let fragment = &gas.vertex_fragment[rows(c)];
-                            gas_dots_range((fragment, part), 0..part.len(), |k| Vec3A::from(v[first + k]), out);
+                            let (fragment, slices) = gas_rows(gas, rows(c));
+                            gas_dots_rows((fragment, slices, part), &v[rows(c)], out);
                         }
                     }
                     return;
@@ -2138,6 +2183,42 @@ pub(crate) fn substep(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `Σ g·v` per fragment over a chunk: slices of one fragment (eight rows at once with AVX2),
+    /// slices without gas (skipped), mixed slices and a last partial slice (row by row), each
+    /// fragment's sum that of its rows' dots.
+    #[test]
+    fn gas_dots_are_the_sums_of_each_fragments_rows() {
+        let mut unit = crate::body::test_randoms(0x9a5d_0075_0f0a_11ce);
+        let n = 45;
+        // Slices: 0 and 1 fragment 0, 2 no gas, 3 mixed (0, 1, none), 4 fragment 1, 5 (five
+        // rows) fragment 1.
+        let fragment: Vec<u32> = (0..n)
+            .map(|i| match i / SLICE {
+                0 | 1 => 0,
+                2 => u32::MAX,
+                3 => [0, 1, u32::MAX][i % 3],
+                _ => 1,
+            })
+            .collect();
+        let slice_fragment = gas::slice_fragments(&fragment);
+        let gradient: Vec<Vec3> = (0..n).map(|_| Vec3::new(unit(), unit(), unit())).collect();
+        let v: Vec<Vec3> = (0..n).map(|_| Vec3::new(unit(), unit(), unit()) * 4.0).collect();
+        let mut out = [f64::NAN; 2];
+        gas_dots_rows((&fragment, &slice_fragment, &gradient), &v, &mut out);
+        let mut want = [0.0f64; 2];
+        let mut size = [0.0f64; 2];
+        for i in 0..n {
+            if fragment[i] != u32::MAX {
+                let dot = gradient[i].as_dvec3().dot(v[i].as_dvec3());
+                want[fragment[i] as usize] += dot;
+                size[fragment[i] as usize] += dot.abs();
+            }
+        }
+        for f in 0..2 {
+            assert!((out[f] - want[f]).abs() <= 1e-6 * size[f], "fragment {f}: {} vs {}", out[f], want[f]);
+        }
+    }
 
     /// Every specialisation of the direction pass (coarse level, contacts, gas: each on or off)
     /// against the plain formula `p = z + F(c) + β p` at every vertex (F the contact filter,
