@@ -505,7 +505,7 @@ fn assemble_chunk_with<const SLICES: bool>(input: &AssemblyInput, t: AssemblyTas
         if slices && lane == 0 {
             let groups = t.couplings.groups_of(i);
             #[cfg(target_arch = "x86_64")]
-            // SAFETY: `SLICES` is set only where the processor has AVX2.
+            // SAFETY: `SLICES` is set only where the processor has AVX2 and FMA.
             unsafe {
                 slice_sums =
                     slice_spring_sums_avx2(&mut t.couplings.groups[groups.clone()], &t.springs[groups], terms, i);
@@ -629,7 +629,7 @@ fn slice_vertex_gas<'a>(sys: &'a System, first: usize, whole: bool, gas_dot_v: &
         u32::MAX => return Some(None),
         f => f as usize,
     };
-    Some(Some(SliceGas { gradient: &sys.gradient[first..first + SLICE], terms: sys.gas_terms(frag, gas_dot_v) }))
+    Some(Some(SliceGas { gradient: &sys.gradient[first..], terms: sys.gas_terms(frag, gas_dot_v) }))
 }
 
 /// The start of the solve at vertex i: Δv from the warm start `guess` and, if it rests on an

@@ -70,7 +70,8 @@ impl GasTerms {
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 #[derive(Clone, Copy)]
 pub(crate) struct SliceGas<'a> {
-    /// `∂V/∂x` of the eight rows.
+    /// `∂V/∂x` of the eight rows, first: the gradient from the slice's first row on (at least
+    /// eight rows; with a row after them, the eight load sixteen bytes at a time).
     pub gradient: &'a [Vec3],
     pub terms: GasTerms,
 }
@@ -117,9 +118,9 @@ pub(crate) fn vertex_blocks(
 /// a one-thread step on the issue-5 balloon), and the force magnitudes returned.
 ///
 /// # Safety
-/// The processor must have AVX2.
+/// The processor must have AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 pub(crate) unsafe fn slice_vertices_avx2(
     sums: &SliceSums,
     mass: &[f32],
@@ -165,9 +166,9 @@ pub(crate) unsafe fn slice_vertices_avx2(
     let hh = _mm256_set1_ps(h);
     let (rx, ry, rz);
     if let Some(gas) = gas {
-        assert!(gas.gradient.len() == SLICE);
-        let axis = |a: usize| std::array::from_fn::<f32, SLICE, _>(|lane| gas.gradient[lane][a]);
-        let (gx, gy, gz) = (load!(axis(0)), load!(axis(1)), load!(axis(2)));
+        assert!(gas.gradient.len() >= SLICE);
+        // SAFETY: the first eight points of the gradient (asserted above).
+        let (gx, gy, gz) = unsafe { super::coupling_slices::load_points_transposed(gas.gradient, 0) };
         let pressure = _mm256_set1_ps(gas.terms.pressure);
         fx = _mm256_add_ps(fx, _mm256_mul_ps(gx, pressure));
         fy = _mm256_add_ps(fy, _mm256_mul_ps(gy, pressure));
@@ -176,9 +177,14 @@ pub(crate) unsafe fn slice_vertices_avx2(
         let s = _mm256_set1_ps(gas.terms.coefficient);
         let scaled = [_mm256_mul_ps(gx, s), _mm256_mul_ps(gy, s), _mm256_mul_ps(gz, s)];
         add_outer_lanes(&mut block, scaled, [gx, gy, gz]);
-        // `|g|` as `Vec3A::length` gives it, one row at a time.
-        let lengths: [f32; SLICE] = std::array::from_fn(|lane| Vec3A::from(gas.gradient[lane]).length());
-        magnitude = _mm256_add_ps(magnitude, _mm256_mul_ps(load!(lengths), _mm256_set1_ps(gas.terms.pressure_bound)));
+        // `|g|` as `Vec3A::length` gives it: `√((x x + y y) + z z)` (a square root is rounded
+        // exactly, eight lanes or one; one row at a time, with its own dot product and square
+        // root, these lengths were the largest share of this kernel).
+        let lengths = _mm256_sqrt_ps(_mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(gx, gx), _mm256_mul_ps(gy, gy)),
+            _mm256_mul_ps(gz, gz),
+        ));
+        magnitude = _mm256_add_ps(magnitude, _mm256_mul_ps(lengths, _mm256_set1_ps(gas.terms.pressure_bound)));
         // Less `g (h² P/V Σ g·v)`.
         let k = _mm256_set1_ps(gas.terms.rhs_scale);
         rx = _mm256_sub_ps(_mm256_add_ps(_mm256_mul_ps(fx, hh), load!(sums.rhs[0])), _mm256_mul_ps(gx, k));
@@ -438,7 +444,7 @@ mod tests {
     #[test]
     fn eight_rows_at_once_are_the_rows_one_at_a_time() {
         #[cfg(target_arch = "x86_64")]
-        if !std::arch::is_x86_feature_detected!("avx2") {
+        if !(std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")) {
             return;
         }
         let mut unit = crate::body::test_randoms(0x51ce_0f7e_471c_e5a3);
@@ -477,13 +483,15 @@ mod tests {
                 sums.extension[lane] = s.extension;
                 sums.alpha[lane] = s.alpha;
             }
-            let gradient: Vec<Vec3> = (0..SLICE).map(|_| Vec3::new(unit(), unit(), unit()) * 0.1).collect();
+            // (With a row after the eight in rounds 1, 5, 9, ...: the gradient's 16-byte loads.)
+            let gradient: Vec<Vec3> = (0..SLICE + 1).map(|_| Vec3::new(unit(), unit(), unit()) * 0.1).collect();
+            let gradient = if round % 4 == 1 { &gradient[..] } else { &gradient[..SLICE] };
             let terms = GasTerms::new(2.5e3 * unit() as f64, 0.4 * unit().abs() as f64, unit() as f64);
-            let gas = (round % 2 == 1).then_some(SliceGas { gradient: &gradient, terms });
+            let gas = (round % 2 == 1).then_some(SliceGas { gradient, terms });
             #[cfg(target_arch = "x86_64")]
             let (mut got_rhs, mut got_inv_diag) = ([Vec3A::NAN; SLICE], [SymmetricBlock::default(); SLICE]);
             #[cfg(target_arch = "x86_64")]
-            // SAFETY: the processor has AVX2 (checked above).
+            // SAFETY: the processor has AVX2 and FMA (checked above).
             let got_magnitude =
                 unsafe { slice_vertices_avx2(&sums, &mass, constants, gas, &mut got_rhs, &mut got_inv_diag) };
             for lane in 0..SLICE {
