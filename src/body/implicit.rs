@@ -221,6 +221,15 @@ impl ImplicitScratch {
         self.prepared.is_some()
     }
 
+    /// Each of the `springs` springs' extension `L - L0` at the end of the last substep, as its
+    /// state pass measured it for the next one (the bits of `springs::spring_extension`), while
+    /// that is still the body's state (anything that changes it forgets what was prepared), and
+    /// the spring count is the same; else None.
+    pub fn prepared_extensions(&self, springs: usize) -> Option<impl Iterator<Item = f32> + '_> {
+        (self.prepared.is_some_and(|p| p.springs == springs) && self.spring_terms.len() == springs)
+            .then(|| self.spring_terms.iter().map(|t| t.extension))
+    }
+
     /// Whether it holds a coarse level made (or tried) for substeps of `h`.
     #[cfg(test)]
     pub fn has_coarse_for(&self, h: f32) -> bool {
