@@ -200,14 +200,15 @@ pub(crate) fn rebuild_springs(
     springs.rest.clear();
     springs.ends.reserve(count);
     springs.rest.reserve(count);
-    let mut next_broken = broken.iter().peekable();
-    for (e, &[a, b]) in topology.edges.iter().enumerate() {
-        if next_broken.next_if_eq(&&(e as u32)).is_some() {
-            continue;
-        }
-        springs.ends.push([a, b]);
-        springs.rest.push((rest[b as usize] - rest[a as usize]).length());
+    // The edges between the broken ones copied in runs, then the rest lengths in a loop of
+    // their own (one loop pushing both took 0.37 ms of the issue-5 balloon's first cracking
+    // step, 30k springs; a fracture phase there is about as long as a plain step).
+    let mut from = 0;
+    for &e in broken.iter().chain(std::iter::once(&(topology.edges.len() as u32))) {
+        springs.ends.extend_from_slice(&topology.edges[from..e as usize]);
+        from = e as usize + 1;
     }
+    springs.rest.extend(springs.ends.iter().map(|&[a, b]| (rest[b as usize] - rest[a as usize]).length()));
     springs.build_adjacency(rest.len());
     springs
 }
