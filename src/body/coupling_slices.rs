@@ -583,6 +583,43 @@ pub(crate) unsafe fn load_rows_transposed(
     (x, y, z)
 }
 
+/// Eight rows of x, y and z lanes into the eight `Vec3A` of `out` (a zero fourth lane): the
+/// inverse of [`load_rows_transposed`].
+///
+/// # Safety
+/// The processor must have AVX2. Panics unless `out` has eight rows.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) unsafe fn store_rows_transposed(
+    out: &mut [Vec3A],
+    x: std::arch::x86_64::__m256,
+    y: std::arch::x86_64::__m256,
+    z: std::arch::x86_64::__m256,
+) {
+    use std::arch::x86_64::*;
+    assert!(out.len() == SLICE, "{} rows, not a slice", out.len());
+    let zero = _mm256_setzero_ps();
+    let xy01 = _mm256_unpacklo_ps(x, y); // x0 y0 x1 y1 | x4 y4 x5 y5
+    let xy23 = _mm256_unpackhi_ps(x, y); // x2 y2 x3 y3 | x6 y6 x7 y7
+    let z01 = _mm256_unpacklo_ps(z, zero); // z0 0 z1 0 | z4 0 z5 0
+    let z23 = _mm256_unpackhi_ps(z, zero);
+    let rows_of = [
+        _mm256_shuffle_ps::<0x44>(xy01, z01), // row 0 | row 4
+        _mm256_shuffle_ps::<0xEE>(xy01, z01), // 1 | 5
+        _mm256_shuffle_ps::<0x44>(xy23, z23), // 2 | 6
+        _mm256_shuffle_ps::<0xEE>(xy23, z23), // 3 | 7
+    ];
+    let to = out.as_mut_ptr() as *mut f32;
+    // SAFETY: eight Vec3A (16 aligned bytes each) of `out` (asserted above).
+    unsafe {
+        for (lane, v) in rows_of.iter().enumerate() {
+            _mm_store_ps(to.add(4 * lane), _mm256_castps256_ps128(*v));
+            _mm_store_ps(to.add(4 * (lane + 4)), _mm256_extractf128_ps::<1>(*v));
+        }
+    }
+}
+
 /// What a product with the implicit system's matrix adds to each row after its couplings' sum
 /// `Σ B (x_row - x_other)`, and how it filters the row. Every slice is indexed by row (all rows,
 /// not a chunk's), except `gas_scale` (by fragment) and `contact_normal` (by slot).
@@ -938,25 +975,8 @@ unsafe fn product_slices_avx2(
         dots_low = _mm256_add_pd(dots_low, _mm256_cvtps_pd(_mm256_castps256_ps128(dot)));
         dots_high = _mm256_add_pd(dots_high, _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(dot)));
         // The eight rows back as Vec3A (a zero fourth lane).
-        let zero = _mm256_setzero_ps();
-        let xy01 = _mm256_unpacklo_ps(rx, ry); // x0 y0 x1 y1 | x4 y4 x5 y5
-        let xy23 = _mm256_unpackhi_ps(rx, ry); // x2 y2 x3 y3 | x6 y6 x7 y7
-        let z01 = _mm256_unpacklo_ps(rz, zero); // z0 0 z1 0 | z4 0 z5 0
-        let z23 = _mm256_unpackhi_ps(rz, zero);
-        let rows_of = [
-            _mm256_shuffle_ps::<0x44>(xy01, z01), // row 0 | row 4
-            _mm256_shuffle_ps::<0xEE>(xy01, z01), // 1 | 5
-            _mm256_shuffle_ps::<0x44>(xy23, z23), // 2 | 6
-            _mm256_shuffle_ps::<0xEE>(xy23, z23), // 3 | 7
-        ];
-        let to = out[row - first..row - first + SLICE].as_mut_ptr() as *mut f32;
-        // SAFETY: eight Vec3A (16 aligned bytes each) of `out`.
-        unsafe {
-            for (lane, v) in rows_of.iter().enumerate() {
-                _mm_store_ps(to.add(4 * lane), _mm256_castps256_ps128(*v));
-                _mm_store_ps(to.add(4 * (lane + 4)), _mm256_extractf128_ps::<1>(*v));
-            }
-        }
+        // SAFETY: AVX2 (this function's contract).
+        unsafe { store_rows_transposed(&mut out[row - first..row - first + SLICE], rx, ry, rz) };
         row += SLICE;
     }
     let mut lanes = [0.0f64; SLICE];

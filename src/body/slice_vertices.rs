@@ -237,26 +237,8 @@ pub(crate) unsafe fn slice_vertices_avx2(
     for (lane, block) in inv_diag.iter_mut().enumerate() {
         *block = SymmetricBlock::from_entries(columns.map(|c| c[lane]));
     }
-    // The eight rows as Vec3A (a zero fourth lane): x y pairs and z 0 pairs, regrouped.
-    let zero = _mm256_setzero_ps();
-    let xy01 = _mm256_unpacklo_ps(rx, ry); // x0 y0 x1 y1 | x4 y4 x5 y5
-    let xy23 = _mm256_unpackhi_ps(rx, ry); // x2 y2 x3 y3 | x6 y6 x7 y7
-    let z01 = _mm256_unpacklo_ps(rz, zero); // z0 0 z1 0 | z4 0 z5 0
-    let z23 = _mm256_unpackhi_ps(rz, zero);
-    let rows_of = [
-        _mm256_shuffle_ps::<0x44>(xy01, z01), // row 0 | row 4
-        _mm256_shuffle_ps::<0xEE>(xy01, z01), // 1 | 5
-        _mm256_shuffle_ps::<0x44>(xy23, z23), // 2 | 6
-        _mm256_shuffle_ps::<0xEE>(xy23, z23), // 3 | 7
-    ];
-    let to = rhs.as_mut_ptr() as *mut f32;
-    // SAFETY: eight Vec3A (16 aligned bytes each) of `rhs` (its length asserted above).
-    unsafe {
-        for (lane, v) in rows_of.iter().enumerate() {
-            _mm_store_ps(to.add(4 * lane), _mm256_castps256_ps128(*v));
-            _mm_store_ps(to.add(4 * (lane + 4)), _mm256_extractf128_ps::<1>(*v));
-        }
-    }
+    // SAFETY: AVX2 (this function's contract); eight rows (asserted above).
+    unsafe { super::coupling_slices::store_rows_transposed(rhs, rx, ry, rz) };
     magnitudes
 }
 
