@@ -437,10 +437,13 @@ impl SliceCouplingSums {
 fn slice_coupling_sums(offsets: &[u32], groups: &[CouplingGroup], input: &[Vec3A], slice: usize) -> [Vec3A; SLICE] {
     let first = slice * SLICE;
     #[cfg(target_arch = "x86_64")]
-    if first + SLICE <= input.len() && std::arch::is_x86_feature_detected!("avx2") {
+    if first + SLICE <= input.len()
+        && std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("fma")
+    {
         let groups = &groups[offsets[slice] as usize..offsets[slice + 1] as usize];
-        // SAFETY: the processor has AVX2 (checked above); rows first..first + 8 are rows of
-        // `input`.
+        // SAFETY: the processor has AVX2 and FMA (checked above); rows first..first + 8 are rows
+        // of `input`.
         return unsafe { slice_coupling_sums_avx2(groups, input, first) };
     }
     std::array::from_fn(|lane| {
@@ -449,10 +452,11 @@ fn slice_coupling_sums(offsets: &[u32], groups: &[CouplingGroup], input: &[Vec3A
     })
 }
 
-/// [`slice_coupling_sums`] of a whole slice (its `groups`, its rows from `first`) with AVX2.
+/// [`slice_coupling_sums`] of a whole slice (its `groups`, its rows from `first`) with AVX2 (and
+/// FMA enabled for the loads it shares with the product; it uses no fused multiply-add).
 ///
 /// # Safety
-/// The processor must have AVX2; `first + 8 <= input.len()`.
+/// The processor must have AVX2 and FMA; `first + 8 <= input.len()`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn slice_coupling_sums_avx2(groups: &[CouplingGroup], input: &[Vec3A], first: usize) -> [Vec3A; SLICE] {

@@ -199,12 +199,17 @@ impl ImplicitScratch {
         self.team_sizer.alone_for(substeps);
     }
 
-    /// The largest other-end offset the last assembly found over its chunks (what the solve
-    /// checked), and that of all the coupling groups.
+    /// Per chunk, the largest other-end offset the last assembly found (what the solve
+    /// checked), and that of the chunk's coupling groups now; and that of all the groups.
     #[cfg(test)]
-    pub fn largest_other_offsets(&self) -> (u32, u32) {
-        let found = self.sums.largest_other.iter().copied().max().unwrap_or(0);
-        (found, largest_other_offset(&self.couplings.groups))
+    pub fn largest_other_offsets(&self) -> (Vec<(u32, u32)>, u32) {
+        let n = self.couplings.offsets.len().saturating_sub(1) * SLICE;
+        let chunks = self.sums.largest_other.iter().enumerate().map(|(c, &found)| {
+            let slices = c * CHUNK / SLICE..((c + 1) * CHUNK).min(n) / SLICE;
+            let groups = self.couplings.offsets[slices.start] as usize..self.couplings.offsets[slices.end] as usize;
+            (found, largest_other_offset(&self.couplings.groups[groups]))
+        });
+        (chunks.collect(), largest_other_offset(&self.couplings.groups))
     }
 
     /// The start of the solve and the last pass of every substep one row at a time (no

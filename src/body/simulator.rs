@@ -1367,15 +1367,30 @@ mod tests {
     /// with the gradient's chunks, give the same bits as one row at a time and that sum in a
     /// pass of its own: a ball dropped on the ground (contact rows, slices touching or going
     /// into the ground, the rest on the fast paths), a few of its vertices pinned once it is
-    /// there, then the same with a sphere obstacle (every row one at a time).
+    /// there, then the same with a sphere obstacle (every row one at a time), and with holes
+    /// whose caps hold gas.
     #[test]
     fn the_last_pass_by_slices_steps_to_the_same_bits() {
-        for sphere in [false, true] {
+        for (sphere, holes) in [(false, false), (true, false), (false, true)] {
             let (mut slices, mut rows) = (ball(2), ball(2));
             for body in [&mut slices, &mut rows] {
                 if sphere {
                     body.add_obstacle(Obstacle::Sphere { center: glam::Vec3::new(2.0, -1.0, 0.0), radius: 0.5 })
                         .unwrap();
+                }
+                if holes {
+                    // Every spring of three vertices cut: holes whose caps hold the gas (the
+                    // gas's `Σ g·v` then waits for the caps' share of the gradient).
+                    for vertex in [5usize, 60, 150] {
+                        // (The springs' ends are internal indices; `break_edge` takes external ones.)
+                        let inside = body.order.internal(vertex) as u32;
+                        while let Some(&[a, b]) = body.springs.ends.iter().find(|e| e.contains(&inside)) {
+                            let (a, b) = (body.order.external(a as usize), body.order.external(b as usize));
+                            body.break_edge(a as u32, b as u32).unwrap();
+                        }
+                    }
+                    let gas = body.gas.as_ref().unwrap();
+                    assert!(gas.caps.iter().any(|cap| gas.n_rt[cap.fragment as usize] > 0.0), "no cap holds gas");
                 }
             }
             if let Scratch::Implicit(s) = &mut rows.scratch {
@@ -1395,7 +1410,7 @@ mod tests {
                 let bits = |b: &Body| {
                     b.nodes.x.iter().chain(&b.nodes.v).flat_map(|p| p.to_array()).map(f32::to_bits).collect::<Vec<_>>()
                 };
-                assert_eq!(bits(&slices), bits(&rows), "step {step}, sphere {sphere}");
+                assert_eq!(bits(&slices), bits(&rows), "step {step}, sphere {sphere}, holes {holes}");
             }
             assert!(slices.nodes.x.iter().any(|x| x.y < -1.1), "the ball reached the ground");
         }
@@ -1428,8 +1443,8 @@ mod tests {
     }
 
     /// The solve's check of the coupling groups' other ends takes their largest offset from the
-    /// assembly's chunks: it is that of all the groups, step after step (a ball of 642 vertices
-    /// in one chunk, and the 2,562 of `implicit_gas_ball` at subdivision 4 in three).
+    /// assembly's chunks: each chunk's is that of its groups, and their largest that of all the
+    /// groups, step after step (balls of 258 vertices, one chunk, and 1,026, two chunks).
     #[test]
     fn the_assembly_finds_the_largest_other_end_of_all_the_groups() {
         for subdivisions in [3, 4] {
@@ -1440,8 +1455,13 @@ mod tests {
             for step in 0..20 {
                 body.step().unwrap();
                 let Scratch::Implicit(s) = &body.scratch else { unreachable!() };
-                let (found, all) = s.largest_other_offsets();
-                assert_eq!(found, all, "step {step}, subdivision {subdivisions}");
+                let (chunks, all) = s.largest_other_offsets();
+                assert_eq!(chunks.len(), body.nodes.len().div_ceil(1024), "subdivision {subdivisions}");
+                for (c, &(found, groups)) in chunks.iter().enumerate() {
+                    assert_eq!(found, groups, "step {step}, subdivision {subdivisions}, chunk {c}");
+                    assert!(found > 0);
+                }
+                assert_eq!(chunks.iter().map(|c| c.0).max(), Some(all));
                 assert!(all as usize + 4 <= 4 * body.nodes.len() && all > 0);
             }
         }
