@@ -784,9 +784,17 @@ unsafe fn slice_dot_avx2(a: &[Vec3], b: &[Vec3], first: usize) -> f64 {
     assert!(first + SLICE <= a.len() && first + SLICE <= b.len());
     // SAFETY: rows first..first + 8 of both (asserted above).
     let ((ax, ay, az), (bx, by, bz)) = unsafe { (load_points_transposed(a, first), load_points_transposed(b, first)) };
-    let dot = _mm256_fmadd_ps(az, bz, _mm256_fmadd_ps(ay, by, _mm256_mul_ps(ax, bx)));
+    lanes_sum_f64(_mm256_fmadd_ps(az, bz, _mm256_fmadd_ps(ay, by, _mm256_mul_ps(ax, bx))))
+}
+
+/// The eight lanes of `v` widened and summed in f64: lanes l and l + 4 first, then pairwise.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn lanes_sum_f64(v: std::arch::x86_64::__m256) -> f64 {
+    use std::arch::x86_64::*;
     let wide =
-        _mm256_add_pd(_mm256_cvtps_pd(_mm256_castps256_ps128(dot)), _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(dot)));
+        _mm256_add_pd(_mm256_cvtps_pd(_mm256_castps256_ps128(v)), _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v)));
     let half = _mm_add_pd(_mm256_castpd256_pd128(wide), _mm256_extractf128_pd::<1>(wide));
     _mm_cvtsd_f64(_mm_add_sd(half, _mm_unpackhi_pd(half, half)))
 }
@@ -1023,13 +1031,7 @@ unsafe fn direction_rows_avx2<const COARSE: bool, const CONTACT: bool, const GAS
             );
             // SAFETY: first + 8 <= n = gradient.len().
             let (gx, gy, gz) = unsafe { load_points_transposed(gradient, first) };
-            let dot = _mm256_fmadd_ps(gz, pz, _mm256_fmadd_ps(gy, py, _mm256_mul_ps(gx, px)));
-            let wide = _mm256_add_pd(
-                _mm256_cvtps_pd(_mm256_castps256_ps128(dot)),
-                _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(dot)),
-            );
-            let half = _mm_add_pd(_mm256_castpd256_pd128(wide), _mm256_extractf128_pd::<1>(wide));
-            let sum = _mm_cvtsd_f64(_mm_add_sd(half, _mm_unpackhi_pd(half, half)));
+            let sum = lanes_sum_f64(_mm256_fmadd_ps(gz, pz, _mm256_fmadd_ps(gy, py, _mm256_mul_ps(gx, px))));
             run.add(gas, shared as usize, sum);
         } else {
             for (q, pair) in pairs.iter().enumerate() {

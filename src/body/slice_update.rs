@@ -90,22 +90,33 @@ pub(crate) unsafe fn update_slice_avx2(
         if !planes.is_empty() {
             let (px, py, pz) = load_points_transposed(x, first);
             for &(point, normal) in planes {
-                let dx = _mm256_sub_ps(px, _mm256_set1_ps(point.x));
-                let dy = _mm256_sub_ps(py, _mm256_set1_ps(point.y));
-                let dz = _mm256_sub_ps(pz, _mm256_set1_ps(point.z));
-                let depth = _mm256_add_ps(
-                    _mm256_add_ps(
-                        _mm256_mul_ps(dx, _mm256_set1_ps(normal.x)),
-                        _mm256_mul_ps(dy, _mm256_set1_ps(normal.y)),
-                    ),
-                    _mm256_mul_ps(dz, _mm256_set1_ps(normal.z)),
-                );
+                let depth = plane_distances((px, py, pz), point, normal);
                 // Not `depth >= 0` (NaN included), as `resolve` tests it before it skips a plane.
                 inside |= _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_NGE_UQ>(depth, _mm256_setzero_ps())) != 0;
             }
         }
         SliceUpdate { finite: _mm256_movemask_ps(finite) == 0xFF, inside }
     }
+}
+
+/// The signed distances `(x - point)·normal` of eight points (x, y and z lanes) from a plane,
+/// as `Obstacle::distance` computes one (`Vec3::dot`'s order, no fused multiply-add).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) fn plane_distances(
+    (px, py, pz): (std::arch::x86_64::__m256, std::arch::x86_64::__m256, std::arch::x86_64::__m256),
+    point: Vec3,
+    normal: Vec3,
+) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    let dx = _mm256_sub_ps(px, _mm256_set1_ps(point.x));
+    let dy = _mm256_sub_ps(py, _mm256_set1_ps(point.y));
+    let dz = _mm256_sub_ps(pz, _mm256_set1_ps(point.z));
+    _mm256_add_ps(
+        _mm256_add_ps(_mm256_mul_ps(dx, _mm256_set1_ps(normal.x)), _mm256_mul_ps(dy, _mm256_set1_ps(normal.y))),
+        _mm256_mul_ps(dz, _mm256_set1_ps(normal.z)),
+    )
 }
 
 #[cfg(test)]

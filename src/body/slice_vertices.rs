@@ -289,14 +289,7 @@ pub(crate) unsafe fn free_slice_start_avx2(
         let (px, py, pz) = unsafe { load_points_transposed(x, first) };
         let margin = _mm256_set1_ps(margin);
         for &(point, normal) in planes {
-            // `(x - point)·normal` as `Vec3::dot` sums it (`Obstacle::distance`).
-            let distance = _mm256_add_ps(
-                _mm256_add_ps(
-                    _mm256_mul_ps(_mm256_sub_ps(px, _mm256_set1_ps(point.x)), _mm256_set1_ps(normal.x)),
-                    _mm256_mul_ps(_mm256_sub_ps(py, _mm256_set1_ps(point.y)), _mm256_set1_ps(normal.y)),
-                ),
-                _mm256_mul_ps(_mm256_sub_ps(pz, _mm256_set1_ps(point.z)), _mm256_set1_ps(normal.z)),
-            );
+            let distance = super::slice_update::plane_distances((px, py, pz), point, normal);
             if _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(distance, margin)) != 0 {
                 return None;
             }
