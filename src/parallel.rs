@@ -7,7 +7,8 @@
 //! feature every pool is serial.
 //!
 //! A loop of many short passes (the iterations of a solver) runs as one parallel region on a
-//! [`Team`] of the pool's threads ([`WorkerPool::team`]): the members claim fixed chunks
+//! [`Team`] of threads ([`WorkerPool::team`]; called from outside the pool, the caller's thread
+//! is its first member and the pool's workers the others): the members claim fixed chunks
 //! ([`Team::claim`]), meet at barriers ([`Team::barrier`]: spinning, then asleep) and share the
 //! arrays of the passes through [`SharedSlice`] (each member writes only the chunks it claimed in
 //! a pass), so a pass costs a barrier (well under a microsecond on idle cores) instead of a fork
@@ -165,8 +166,9 @@ impl WorkerPool {
     }
 
     /// Runs `f` once on every thread of the pool at the same time (on the caller's thread alone
-    /// when serial), each call with its own [`Team`] member (index `0..size`), and returns member
-    /// 0's result. The members share work by [`Team::share`] and meet at [`Team::barrier`], so a
+    /// when serial; called from a thread outside the pool, on that thread as member 0 and on
+    /// workers of the pool as the others), each call with its own [`Team`] member (index
+    /// `0..size`), and returns member 0's result. The members share work by [`Team::share`] and meet at [`Team::barrier`], so a
     /// loop of many short parallel passes (the iterations of a solver) is one parallel region
     /// instead of a fork and join per pass. Every member must reach the same barriers. A panic in
     /// one member makes the others' barriers panic too (nobody waits forever), and comes back out
@@ -200,10 +202,44 @@ impl WorkerPool {
                     }
                 }
             };
-            // Threads past the team's members take no part (but the call returns only when each
-            // has run its empty part).
-            let mut results = pool.install(|| pool.broadcast(|ctx| (ctx.index() < members).then(|| run(ctx.index()))));
-            let result = results.swap_remove(0).expect("member 0 runs");
+            let result = if pool.current_thread_index().is_none() {
+                // Called from outside the pool: this thread is member 0 and the others are
+                // spawned into the pool, instead of handing the whole region to a worker and
+                // sleeping until it is over (woken at the end: see `Body::step`). It starts at
+                // once; a member that a sleeping worker starts late leaves its share of the first
+                // pass to the others (`Team::claim`).
+                let done = AtomicUsize::new(0);
+                let mut result = None;
+                pool.in_place_scope(|scope| {
+                    for index in 1..members {
+                        let (run, done) = (&run, &done);
+                        scope.spawn(move |_| {
+                            let _ = run(index);
+                            done.fetch_add(1, Ordering::Release);
+                        });
+                    }
+                    result = Some(run(0));
+                    // The others are a moment behind (their last pass): waiting here for them
+                    // keeps the scope's own wait, which sleeps, from making this thread sleep and
+                    // be woken again.
+                    let start = std::time::Instant::now();
+                    let mut spins = 0u32;
+                    while done.load(Ordering::Acquire) + 1 < members {
+                        std::hint::spin_loop();
+                        spins = spins.wrapping_add(1);
+                        if spins % 64 == 0 && start.elapsed() >= SPIN_BEFORE_SLEEP {
+                            break;
+                        }
+                    }
+                });
+                result.expect("member 0 ran")
+            } else {
+                // Threads past the team's members take no part (but the call returns only when
+                // each has run its empty part).
+                let mut results =
+                    pool.install(|| pool.broadcast(|ctx| (ctx.index() < members).then(|| run(ctx.index()))));
+                results.swap_remove(0).expect("member 0 runs")
+            };
             let stats = TeamStats {
                 members,
                 barriers: sync.barriers.load(Ordering::Relaxed),
@@ -764,15 +800,69 @@ mod tests {
     #[test]
     fn a_panicking_member_does_not_leave_the_others_waiting() {
         let pool = WorkerPool::new(2).unwrap();
-        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            pool.team(|team| {
-                if team.index() == team.size() - 1 {
-                    panic!("member");
-                }
-                team.barrier();
-                team.barrier();
-            })
-        }));
-        assert!(result.is_err());
+        // The last member (a worker), then the first (the caller's thread when called from
+        // outside the pool, a worker from inside).
+        for first in [false, true] {
+            for inside in [false, true] {
+                let team = || {
+                    pool.team(|team| {
+                        if team.index() == if first { 0 } else { team.size() - 1 } {
+                            panic!("member");
+                        }
+                        team.barrier();
+                        team.barrier();
+                    })
+                };
+                let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    if inside { pool.install(team) } else { team() }
+                }));
+                assert!(result.is_err(), "first {first}, inside {inside}");
+            }
+        }
+    }
+
+    /// Called from outside the pool, the caller's thread is member 0 and the others run on the
+    /// pool's workers; called from a worker (inside `install`), every member runs on a worker.
+    /// Both give the same bits, and every member runs once.
+    #[cfg(feature = "parallel")]
+    #[test]
+    fn the_callers_thread_is_member_0_from_outside_the_pool() {
+        use std::sync::Mutex;
+        let pool = WorkerPool::new(3).unwrap();
+        let caller = std::thread::current().id();
+        let run = |inside: bool| {
+            let threads = Mutex::new(Vec::new());
+            let mut data: Vec<f32> = (0..4000).map(|i| (i as f32 * 0.1).cos()).collect();
+            let shared = SharedSlice::new(&mut data);
+            let team = || {
+                pool.team(|team| {
+                    threads.lock().unwrap().push((team.index(), std::thread::current().id()));
+                    for _ in 0..50 {
+                        team.claim(40, |c| {
+                            // SAFETY: chunk c was claimed by this member alone in this pass.
+                            let part = unsafe { shared.part(c * 100..(c + 1) * 100) };
+                            part.iter_mut().for_each(|x| *x = (*x * 1.3).sin());
+                        });
+                        team.barrier();
+                    }
+                    team.index()
+                })
+            };
+            let first = if inside { pool.install(team) } else { team() };
+            assert_eq!(first, 0, "the result is member 0's");
+            let mut threads = threads.into_inner().unwrap();
+            threads.sort_by_key(|t| t.0);
+            assert_eq!(threads.iter().map(|t| t.0).collect::<Vec<_>>(), [0, 1, 2], "inside {inside}");
+            let on_caller: Vec<usize> = threads.iter().filter(|t| t.1 == caller).map(|t| t.0).collect();
+            assert_eq!(on_caller, if inside { vec![] } else { vec![0] }, "inside {inside}");
+            data
+        };
+        let outside = run(false);
+        assert_eq!(outside, run(true));
+        let mut data: Vec<f32> = (0..4000).map(|i| (i as f32 * 0.1).cos()).collect();
+        for _ in 0..50 {
+            data.iter_mut().for_each(|x| *x = (*x * 1.3).sin());
+        }
+        assert_eq!(outside, data);
     }
 }

@@ -699,11 +699,28 @@ impl Body {
     /// Advances one step (SPEC 2.5). On divergence the state is rolled back and an
     /// [`ErrorKind::Unstable`] error says what blew up and which time step would be stable.
     pub fn step(&mut self) -> Result<BodyStats> {
-        // The whole step runs inside the worker pool: each parallel loop in it is then a fork
-        // among the pool's own threads, not a hand-off from the caller's thread and back (tens
-        // of microseconds each, and a step has dozens). Serial pools run it on this thread.
+        // A step with parallel loops of its own runs inside the worker pool: each loop is then a
+        // fork among the pool's own threads, not a hand-off from the caller's thread and back
+        // (tens of microseconds each, and such a step has dozens). Serial pools run it on this
+        // thread.
+        if self.steps_on_callers_thread() {
+            return self.run_step();
+        }
         let pool = std::sync::Arc::clone(&self.pool);
-        pool.install(|| self.step_in_pool())
+        pool.install(|| self.run_step())
+    }
+
+    /// Whether a step runs on the caller's thread rather than inside the pool: an implicit step
+    /// that cannot crack and has no wind forks only for its solver's team (one region a
+    /// substep), whose first member is then the caller's thread ([`WorkerPool::team_of`]).
+    /// Handed to a worker, the whole step cost the caller's thread a sleep and a wake-up: on the
+    /// issue-5 balloon (benches/body_balloon.rs, 2 threads) 80-120 thousand cycles a step
+    /// (2-3%) on the caller's clock beyond the step's own. Run here (ten alternating pairs of
+    /// runs on a busy machine): mean step 1.95 -> 1.87 ms, median 1.54 -> 1.45 ms, CPU time
+    /// 3.43 -> 3.22 ms a step (no worker waits for the whole step); per step the fastest of
+    /// eight runs, then the mean: 1.11 -> 1.07 ms.
+    fn steps_on_callers_thread(&self) -> bool {
+        matches!(self.scratch, Scratch::Implicit(_)) && self.fracture.is_none() && self.settings.drag <= 0.0
     }
 
     /// [`Body::step`] without its fracture phase: no spring cracks and no core is released,
@@ -720,7 +737,8 @@ impl Body {
         result
     }
 
-    fn step_in_pool(&mut self) -> Result<BodyStats> {
+    /// The step, on whichever thread [`Body::step`] chose.
+    fn run_step(&mut self) -> Result<BodyStats> {
         let started = Instant::now();
         let substeps = self.settings.substeps.max(1);
         let h = self.settings.time_step / substeps as f32;
@@ -1360,6 +1378,28 @@ mod tests {
             assert_eq!(both.nodes.v, mixed.nodes.v, "step {step}");
         }
         assert!(both.nodes.x.iter().any(|x| x.y < -1.1), "the ball reached the ground");
+    }
+
+    /// A body that can crack runs its step inside its pool; one that cannot (implicit, no wind)
+    /// on the caller's thread, whichever thread that is: stepped from other threads than the one
+    /// that made it, in turn, it gives the same bits as on one thread, and so does a body stepped
+    /// at the same time from another thread.
+    #[test]
+    fn a_body_steps_to_the_same_bits_from_any_thread() {
+        let (mut here, mut moved, mut other) = (ball(2), ball(2), ball(2));
+        assert!(here.steps_on_callers_thread());
+        for step in 0..40 {
+            here.step().unwrap();
+            std::thread::scope(|scope| {
+                scope.spawn(|| moved.step().unwrap());
+                scope.spawn(|| other.step().unwrap());
+            });
+            assert_eq!(here.nodes.x, moved.nodes.x, "step {step}");
+            assert_eq!(here.nodes.v, other.nodes.v, "step {step}");
+        }
+        assert!(here.nodes.x.iter().any(|x| x.y < -1.1), "the ball reached the ground");
+        let cracking = implicit_gas_ball(BodySettings { threads: 2, break_strain: 0.5, ..BodySettings::default() });
+        assert!(!cracking.steps_on_callers_thread());
     }
 
     /// The start of the solve and the last pass of a substep with slices of eight rows at once
