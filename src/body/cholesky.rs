@@ -591,7 +591,10 @@ impl Cholesky {
         /// solves went from 0.395 to 0.337-0.341 of the product's time on one thread (about 1.3%
         /// of a step), but only from 0.318-0.323 to 0.307-0.314 on two (each member solves one
         /// half, whose own halves are smaller), with the same bits (each row's sum is unchanged:
-        /// the drop keeps its CG iterations step for step).
+        /// the drop keeps its CG iterations step for step). Four subtrees side by side (the
+        /// grandchildren, then the halves' separators as a pair) gave the same bits but no gain:
+        /// 0.424 -> 0.477 of the product's time on one thread, 0.373 -> 0.372 on two (three
+        /// profiles each way).
         fn forward_pair / forward_pair_avx2 / forward_pair_with(
             a: std::ops::Range<usize>, b: std::ops::Range<usize>, y: SharedSlice
         )
