@@ -199,6 +199,16 @@ impl CoarseView<'_> {
     /// `out[k - rows.start]` = the sum of `r` over the aggregate of factor row k, for the rows
     /// `rows` (in vertex order, alternate members in two running sums, so that each addition
     /// does not wait for the one before; the order is fixed by the aggregate).
+    ///
+    /// On two threads each member restricts its half of the rows after the residual pass, and
+    /// about half of those residuals were just written by the other core (the issue-5 balloon,
+    /// benches/body_balloon.rs: 126-190 thousand cycles a step per member, against 203 for all
+    /// rows on one thread). Measured and not kept: the aggregates that lie in one chunk of the
+    /// residual pass (883 of 1,167, 7,729 of the 10,242 vertices) restricted by that pass while
+    /// the chunk's residual is in the core's cache, the others here (the same sums, the same
+    /// bits). Two bodies stepped in turn in one process, one each way: the step 0.97-1.00 of
+    /// the old on two threads in three runs, 0.99-1.03 in three more, and 1.01-1.03 on one
+    /// thread.
     pub fn restrict(&self, rows: std::ops::Range<usize>, r: &[Vec3A], out: &mut [Vec3A]) {
         for (o, k) in out.iter_mut().zip(rows) {
             let members = &self.members[self.member_offsets[k] as usize..self.member_offsets[k + 1] as usize];
