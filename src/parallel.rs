@@ -167,8 +167,9 @@ impl WorkerPool {
 
     /// Runs `f` once on every thread of the pool at the same time (on the caller's thread alone
     /// when serial; called from a thread outside the pool, on that thread as member 0 and on
-    /// workers of the pool as the others), each call with its own [`Team`] member (index
-    /// `0..size`), and returns member 0's result. The members share work by [`Team::share`] and meet at [`Team::barrier`], so a
+    /// workers of the pool as the others, one worker then idle), each call with its own [`Team`]
+    /// member (index `0..size`), and returns member 0's result. Not from inside a team of the
+    /// same pool (its members would wait for workers that are all in the outer team). The members share work by [`Team::share`] and meet at [`Team::barrier`], so a
     /// loop of many short parallel passes (the iterations of a solver) is one parallel region
     /// instead of a fork and join per pass. Every member must reach the same barriers. A panic in
     /// one member makes the others' barriers panic too (nobody waits forever), and comes back out
@@ -836,7 +837,8 @@ mod tests {
             let shared = SharedSlice::new(&mut data);
             let team = || {
                 pool.team(|team| {
-                    threads.lock().unwrap().push((team.index(), std::thread::current().id()));
+                    let name = std::thread::current().name().unwrap_or_default().to_owned();
+                    threads.lock().unwrap().push((team.index(), std::thread::current().id(), name));
                     for _ in 0..50 {
                         team.claim(40, |c| {
                             // SAFETY: chunk c was claimed by this member alone in this pass.
@@ -855,6 +857,10 @@ mod tests {
             assert_eq!(threads.iter().map(|t| t.0).collect::<Vec<_>>(), [0, 1, 2], "inside {inside}");
             let on_caller: Vec<usize> = threads.iter().filter(|t| t.1 == caller).map(|t| t.0).collect();
             assert_eq!(on_caller, if inside { vec![] } else { vec![0] }, "inside {inside}");
+            // The others on this pool's workers (not the host's global pool).
+            let named: Vec<String> = threads.iter().filter(|t| t.1 != caller).map(|t| t.2.clone()).collect();
+            assert_eq!(named.len(), if inside { 3 } else { 2 });
+            assert!(named.iter().all(|name| name.starts_with("softshell-")), "{named:?}");
             data
         };
         let outside = run(false);

@@ -96,7 +96,7 @@ impl Scratch {
 /// A mass-spring soft body with gas and fracture.
 pub struct Body {
     settings: BodySettings,
-    /// Shared with the step's own closure, which runs inside it (see [`Body::step`]).
+    /// Shared with the step's own closure when the step runs inside it (see [`Body::step`]).
     pool: std::sync::Arc<WorkerPool>,
     nodes: Nodes,
     /// The caller's vertex indices and the body's (see `vertex_order`): every index in and out
@@ -149,6 +149,9 @@ pub struct Body {
     start_gravity: f64,
     start_gas: f64,
     last: BodyStats,
+    /// Tests: the thread the last step ran on ([`Body::step`] chooses it).
+    #[cfg(test)]
+    last_step_thread: Option<std::thread::ThreadId>,
 }
 
 /// The [`Model`] of a body's fields (a macro, not a method: the callers hold other fields of
@@ -345,6 +348,8 @@ impl Body {
             start_gravity: 0.0,
             start_gas: 0.0,
             last: BodyStats::default(),
+            #[cfg(test)]
+            last_step_thread: None,
         };
         // A mesh reaching into the ground starts on it (see `add_obstacle`), unless all of it is
         // below.
@@ -739,6 +744,10 @@ impl Body {
 
     /// The step, on whichever thread [`Body::step`] chose.
     fn run_step(&mut self) -> Result<BodyStats> {
+        #[cfg(test)]
+        {
+            self.last_step_thread = Some(std::thread::current().id());
+        }
         let started = Instant::now();
         let substeps = self.settings.substeps.max(1);
         let h = self.settings.time_step / substeps as f32;
@@ -1384,22 +1393,42 @@ mod tests {
     /// on the caller's thread, whichever thread that is: stepped from other threads than the one
     /// that made it, in turn, it gives the same bits as on one thread, and so does a body stepped
     /// at the same time from another thread.
+    ///
+    /// Also from a worker of another rayon pool (a host that steps its bodies in parallel
+    /// loops): then the step runs on that worker, its team's other member on the body's own pool.
+    #[cfg(feature = "parallel")]
     #[test]
     fn a_body_steps_to_the_same_bits_from_any_thread() {
-        let (mut here, mut moved, mut other) = (ball(2), ball(2), ball(2));
+        let (mut here, mut moved, mut other, mut hosted) = (ball(2), ball(2), ball(2), ball(2));
         assert!(here.steps_on_callers_thread());
+        let host = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
         for step in 0..40 {
             here.step().unwrap();
+            assert_eq!(here.last_step_thread, Some(std::thread::current().id()), "on the caller's thread");
             std::thread::scope(|scope| {
-                scope.spawn(|| moved.step().unwrap());
-                scope.spawn(|| other.step().unwrap());
+                for body in [&mut moved, &mut other] {
+                    scope.spawn(move || {
+                        body.step().unwrap();
+                        assert_eq!(body.last_step_thread, Some(std::thread::current().id()));
+                    });
+                }
             });
+            let worker = host.install(|| {
+                hosted.step().unwrap();
+                std::thread::current().id()
+            });
+            assert_eq!(hosted.last_step_thread, Some(worker), "on the host pool's worker");
             assert_eq!(here.nodes.x, moved.nodes.x, "step {step}");
             assert_eq!(here.nodes.v, other.nodes.v, "step {step}");
+            assert_eq!(here.nodes.x, hosted.nodes.x, "step {step}");
         }
         assert!(here.nodes.x.iter().any(|x| x.y < -1.1), "the ball reached the ground");
-        let cracking = implicit_gas_ball(BodySettings { threads: 2, break_strain: 0.5, ..BodySettings::default() });
+        // A body that can crack steps inside its own pool.
+        let mut cracking = implicit_gas_ball(BodySettings { threads: 2, break_strain: 0.5, ..BodySettings::default() });
         assert!(!cracking.steps_on_callers_thread());
+        cracking.step().unwrap();
+        let thread = cracking.last_step_thread.unwrap();
+        assert_ne!(thread, std::thread::current().id());
     }
 
     /// The start of the solve and the last pass of a substep with slices of eight rows at once
