@@ -720,10 +720,11 @@ impl Body {
     /// substep), whose first member is then the caller's thread ([`WorkerPool::team_of`]).
     /// Handed to a worker, the whole step cost the caller's thread a sleep and a wake-up: on the
     /// issue-5 balloon (benches/body_balloon.rs, 2 threads) 80-120 thousand cycles a step
-    /// (2-3%) on the caller's clock beyond the step's own. Run here (ten alternating pairs of
-    /// runs on a busy machine): mean step 1.95 -> 1.87 ms, median 1.54 -> 1.45 ms, CPU time
-    /// 3.43 -> 3.22 ms a step (no worker waits for the whole step); per step the fastest of
-    /// eight runs, then the mean: 1.11 -> 1.07 ms.
+    /// (2-3%) on the caller's clock beyond the step's own. Run here, three series of 10-12
+    /// alternating pairs of runs on a busy machine gave the mean step 0.96, 1.04 and 0.97 times
+    /// the handed-off one (CPU time 0.94, 1.01 and 0.96), and per step the fastest of eight
+    /// runs, then the mean, 1.11 -> 1.07 ms: a gain of a few percent at most, within the
+    /// machine's noise.
     fn steps_on_callers_thread(&self) -> bool {
         matches!(self.scratch, Scratch::Implicit(_)) && self.fracture.is_none() && self.settings.drag <= 0.0
     }
