@@ -370,7 +370,10 @@ const HELD_PULL_SHARE: f32 = 0.1;
 const TOUCH_MARGIN: f32 = 1e-6;
 
 /// Vertices per parallel chunk (fixed, so the result does not depend on the thread count; whole
-/// slices of the coupling layout).
+/// slices of the coupling layout). On the issue-5 balloon (benches/body_balloon.rs, 2 threads,
+/// ten alternating pairs of runs, the same CG iterations step for step) 512 took the mean step
+/// from 1.66 to 1.83 ms (per step the fastest of six runs: 1.28 -> 1.47), 2048 kept it (1.63 and
+/// 1.63; fastest 1.03 -> 1.15).
 const CHUNK: usize = 1024;
 const _: () = assert!(CHUNK % SLICE == 0);
 
