@@ -169,7 +169,8 @@ impl WorkerPool {
     /// when serial; called from a thread outside the pool, on that thread as member 0 and on
     /// workers of the pool as the others, one worker then idle), each call with its own [`Team`]
     /// member (index `0..size`), and returns member 0's result. Not from inside a team of the
-    /// same pool (its members would wait for workers that are all in the outer team). The members share work by [`Team::share`] and meet at [`Team::barrier`], so a
+    /// same pool (its members would wait for workers that are all in the outer team). The
+    /// members share work by [`Team::share`] and meet at [`Team::barrier`], so a
     /// loop of many short parallel passes (the iterations of a solver) is one parallel region
     /// instead of a fork and join per pass. Every member must reach the same barriers. A panic in
     /// one member makes the others' barriers panic too (nobody waits forever), and comes back out
