@@ -224,15 +224,7 @@ impl WorkerPool {
                     // The others are a moment behind (their last pass): waiting here for them
                     // keeps the scope's own wait, which sleeps, from making this thread sleep and
                     // be woken again.
-                    let start = std::time::Instant::now();
-                    let mut spins = 0u32;
-                    while done.load(Ordering::Acquire) + 1 < members {
-                        std::hint::spin_loop();
-                        spins = spins.wrapping_add(1);
-                        if spins % 64 == 0 && start.elapsed() >= SPIN_BEFORE_SLEEP {
-                            break;
-                        }
-                    }
+                    spin_until(std::time::Instant::now(), || done.load(Ordering::Acquire) + 1 >= members);
                 });
                 result.expect("member 0 ran")
             } else {
@@ -493,28 +485,39 @@ impl Team<'_> {
             }
         };
         let start = std::time::Instant::now();
-        let mut spins = 0u32;
-        while !passed() {
+        if spin_until(start, || {
             poisoned();
-            std::hint::spin_loop();
-            spins = spins.wrapping_add(1);
-            // (The clock read once every 64 spins.)
-            if spins % 64 == 0 && start.elapsed() >= SPIN_BEFORE_SLEEP {
-                let mut guard = sync.park.lock().unwrap_or_else(|e| e.into_inner());
-                sync.sleepers.0.fetch_add(1, Ordering::SeqCst);
-                while !passed() && !sync.poisoned.load(Ordering::SeqCst) {
-                    guard = sync.wake.wait_timeout(guard, SLEEP_LIMIT).unwrap_or_else(|e| e.into_inner()).0;
-                }
-                sync.sleepers.0.fetch_sub(1, Ordering::SeqCst);
-                drop(guard);
-                poisoned();
-                if start.elapsed() >= LONG_WAIT {
-                    self.long_waits.set(self.long_waits.get() + 1);
-                }
-                return;
-            }
+            passed()
+        }) {
+            return;
+        }
+        let mut guard = sync.park.lock().unwrap_or_else(|e| e.into_inner());
+        sync.sleepers.0.fetch_add(1, Ordering::SeqCst);
+        while !passed() && !sync.poisoned.load(Ordering::SeqCst) {
+            guard = sync.wake.wait_timeout(guard, SLEEP_LIMIT).unwrap_or_else(|e| e.into_inner()).0;
+        }
+        sync.sleepers.0.fetch_sub(1, Ordering::SeqCst);
+        drop(guard);
+        poisoned();
+        if start.elapsed() >= LONG_WAIT {
+            self.long_waits.set(self.long_waits.get() + 1);
         }
     }
+}
+
+/// Spins until `done()`, for at most [`SPIN_BEFORE_SLEEP`] from `start` (the clock read once
+/// every 64 spins); returns whether `done()` became true.
+#[inline(always)]
+fn spin_until(start: std::time::Instant, mut done: impl FnMut() -> bool) -> bool {
+    let mut spins = 0u32;
+    while !done() {
+        std::hint::spin_loop();
+        spins = spins.wrapping_add(1);
+        if spins % 64 == 0 && start.elapsed() >= SPIN_BEFORE_SLEEP {
+            return false;
+        }
+    }
+    true
 }
 
 /// A slice shared by the members of a [`Team`]: between two barriers each member writes only
