@@ -716,7 +716,8 @@ impl Body {
     }
 
     /// Whether a step runs on the caller's thread rather than inside the pool: an implicit step
-    /// that cannot crack and has no wind forks only for its solver's team (one region a
+    /// that cannot crack by itself (no break limit, the test of its fracture phase; cuts by hand
+    /// happen between steps) and has no wind forks only for its solver's team (one region a
     /// substep), whose first member is then the caller's thread ([`WorkerPool::team_of`]).
     /// Handed to a worker, the whole step cost the caller's thread a sleep and a wake-up: on the
     /// issue-5 balloon (benches/body_balloon.rs, 2 threads) 80-120 thousand cycles a step
@@ -726,7 +727,7 @@ impl Body {
     /// runs, then the mean, 1.11 -> 1.07 ms: a gain of a few percent at most, within the
     /// machine's noise.
     fn steps_on_callers_thread(&self) -> bool {
-        matches!(self.scratch, Scratch::Implicit(_)) && self.fracture.is_none() && self.settings.drag <= 0.0
+        matches!(self.scratch, Scratch::Implicit(_)) && !self.settings.fracture_enabled() && self.settings.drag <= 0.0
     }
 
     /// [`Body::step`] without its fracture phase: no spring cracks and no core is released,
@@ -1424,6 +1425,13 @@ mod tests {
             assert_eq!(here.nodes.x, hosted.nodes.x, "step {step}");
         }
         assert!(here.nodes.x.iter().any(|x| x.y < -1.1), "the ball reached the ground");
+        // A body cut by hand, without break limits, still steps on the caller's thread.
+        let mut cut = ball(2);
+        let [a, b] = cut.springs.ends[0];
+        let (a, b) = (cut.order.external(a as usize), cut.order.external(b as usize));
+        cut.break_edge(a as u32, b as u32).unwrap();
+        cut.step().unwrap();
+        assert_eq!(cut.last_step_thread, Some(std::thread::current().id()));
         // A body that can crack steps inside its own pool.
         let mut cracking = implicit_gas_ball(BodySettings { threads: 2, break_strain: 0.5, ..BodySettings::default() });
         assert!(!cracking.steps_on_callers_thread());
