@@ -1193,6 +1193,12 @@ impl Shared<'_> {
     /// barriers: on the balloon (benches/body_balloon.rs, 2 threads, four alternating pairs) the
     /// step took 2.53-2.68 ms that way and 2.16-2.61 ms this way (6.5 -> 6.3 CG iterations per
     /// step: the separator rows are summed in another order).
+    ///
+    /// Measured and not kept: every member solving the whole coarse system in copies of its own
+    /// (as a one-member team does: the same bits), so that no barrier is needed inside this part
+    /// nor after it (each member's direction pass reads its own copy). One body, the two ways
+    /// switched every other step (four runs): the step 1.09-1.18 times this one's; the coarse
+    /// work a member then does costs more than the two barriers' waits.
     fn coarse_part(&self, team: &Team) -> f64 {
         let Some(view) = &self.coarse else { return 0.0 };
         let factor = view.factor;
