@@ -74,6 +74,17 @@
 //!   vertical one also without the vertices in contact: 5,118 (5,138 without that), the softest
 //!   value at step 45 0.02 -> 0.025.
 //!
+//! Deflating those soft modes (deflated PCG, Saad, Yeung, Erhel and Guyomarc'h 2000: the start
+//! and every search direction made A-orthogonal to a few vectors W) works only with the modes of
+//! the step's own matrix. A serial prototype that first solved each of the drop's first 200
+//! steps plainly (the same iteration counts as the solve here, step for step), took the Ritz
+//! vectors of its four or eight smallest values and solved again deflated by them, took 2,938 ->
+//! 1,527 (four) and 966 (eight) iterations, steps 33-119 1,673 -> 840 and 565: the upper bound,
+//! the vectors being made by the solve they deflate. Deflated by the previous step's vectors (as
+//! a solver recycling them would be), 2,770 and 2,730, steps 33-119 1,606 and 1,581: 4-6% fewer,
+//! for four or eight more products with the matrix a step and as many dot products and updates
+//! an iteration. The soft clusters move from step to step as the patch wrinkles.
+//!
 //! Smoothed aggregation (the prolongation `(I - ω D⁻¹ A_s) P` of the scalar matrix `A_s` below,
 //! and the Galerkin coarse matrix `Pᵀ A_s P` of it), measured on the issue-5 balloon
 //! (benches/body_balloon.rs, one thread, five or ten drops 0 to 25 mm higher than the issue's,
