@@ -4,10 +4,13 @@
 # alternately in the same session, so that the speed can be quoted as a ratio on a noisy,
 # shared machine. Bullet is installed for this script only (Debian's libbullet-dev), never a
 # dependency of the crate.
-#   bash benches/peers/balloon_vs_bullet.sh [rounds (default 3)] [quick] [zerog]
+#   bash benches/peers/balloon_vs_bullet.sh [rounds (default 3)] [quick] [zerog] [interleaved]
 # quick: 200 steps per run instead of 600.
 # zerog: the zero-gravity scene instead (no ground; body_balloon.rs's zero-gravity run, 2
 #        threads, which prints the mean step time only, so the median columns are left empty).
+# interleaved: each round one process (balloon_interleaved.cpp, linked with Bullet and our
+#        library) that steps the two balloons in turn, ten steps at a time, instead of two
+#        whole runs one after the other (not with zerog).
 # Build flags of the C++ side: g++ -std=c++17 -O2, no -march=native (only the untimed driver is
 # compiled here; Bullet is Debian's generic x86-64 build, as our crate is without
 # target-cpu=native).
@@ -17,11 +20,13 @@ cd "$(dirname "$0")/../.."
 rounds=3
 quick=""
 zerog=""
+interleaved=""
 for arg in "$@"; do
   case "$arg" in
     quick) quick=quick ;;
     zerog) zerog=zerog ;;
-    *[!0-9]* | '') echo "usage: $0 [rounds] [quick] [zerog]" >&2; exit 2 ;;
+    interleaved) interleaved=interleaved ;;
+    *[!0-9]* | '') echo "usage: $0 [rounds] [quick] [zerog] [interleaved]" >&2; exit 2 ;;
     *) rounds=$arg ;;
   esac
 done
@@ -43,6 +48,34 @@ mkdir -p target/peers
 bullet=target/peers/bullet_balloon
 # shellcheck disable=SC2086 # the flags are lists of words
 g++ -std=c++17 -O2 -Wall -Wextra -o "$bullet" benches/peers/bullet_balloon.cpp $bullet_cflags $bullet_libs
+
+if [ -n "$interleaved" ]; then
+  [ -z "$zerog" ] || { echo "interleaved runs the drop only, not zerog" >&2; exit 2; }
+  cargo build --release --lib
+  interleaved_bin=target/peers/balloon_interleaved
+  # shellcheck disable=SC2086 # the flags are lists of words
+  g++ -std=c++17 -O2 -Wall -Wextra -o "$interleaved_bin" benches/peers/balloon_interleaved.cpp -Iinclude \
+    $bullet_cflags $bullet_libs -Ltarget/release -Wl,-rpath,"$PWD/target/release" -lsoftshell
+  printf 'machine: %s cores, load average %s\n' "$(nproc)" "$(cut -d' ' -f1-3 /proc/loadavg)"
+  printf '%5s | %-26s | %-26s | %s\n' round "Bullet (1 thread)" "ours, 2 threads (default)" "ours / Bullet"
+  printf '%5s | %8s %8s %8s | %8s %8s %8s | %8s %8s\n' "" ms/step median V/V0 ms/step median V/V0 mean median
+  ratios=(); median_ratios=()
+  field() { sed "s/.* $1=\([^ ]*\).*/\1/" <<<"$2"; }
+  for round in $(seq 1 "$rounds"); do
+    r=$("$interleaved_bin" $quick | grep '^RESULT' || true)
+    [ -n "$r" ] || { echo "round $round: balloon_interleaved printed no result" >&2; exit 1; }
+    ratios+=("$(field ratio "$r")"); median_ratios+=("$(field median_ratio "$r")")
+    printf '%5s | %8.2f %8.2f %8.4f | %8.2f %8.2f %8.4f | %8.3f %8.3f\n' "$round" "$(field bullet_ms "$r")" \
+      "$(field bullet_median "$r")" "$(field bullet_settled "$r")" "$(field ours_ms "$r")" \
+      "$(field ours_median "$r")" "$(field ours_settled "$r")" "$(field ratio "$r")" "$(field median_ratio "$r")"
+  done
+  median() { printf '%s\n' "$@" | sort -g | awk '{ v[NR] = $1 } END {
+    print (NR % 2 ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2) }'; }
+  printf '\nmedian over %s interleaved rounds of ours (2 threads) / Bullet: %s (mean step times), %s (median step times)\n' \
+    "$rounds" "$(median "${ratios[@]}")" "$(median "${median_ratios[@]}")"
+  printf 'load average at the end: %s\n' "$(cut -d' ' -f1-3 /proc/loadavg)"
+  exit 0
+fi
 
 # Our bench binary, as `cargo bench` runs it (the executable with --bench, then the arguments
 # after --).
