@@ -59,10 +59,12 @@ if [ -n "$interleaved" ]; then
   printf 'machine: %s cores, load average %s\n' "$(nproc)" "$(cut -d' ' -f1-3 /proc/loadavg)"
   printf '%5s | %-26s | %-26s | %s\n' round "Bullet (1 thread)" "ours, 2 threads (default)" "ours / Bullet"
   printf '%5s | %8s %8s %8s | %8s %8s %8s | %8s %8s\n' "" ms/step median V/V0 ms/step median V/V0 mean median
-  ratios=(); median_ratios=()
+  ratios=(); median_ratios=(); phases=()
   field() { sed "s/.* $1=\([^ ]*\).*/\1/" <<<"$2"; }
   for round in $(seq 1 "$rounds"); do
-    r=$("$interleaved_bin" $quick | grep '^RESULT' || true)
+    out=$("$interleaved_bin" $quick || true)
+    r=$(grep '^RESULT' <<<"$out" || true)
+    phases+=("$(sed -n 's/^per 100 steps, softshell \/ Bullet (mean step times): //p' <<<"$out")")
     [ -n "$r" ] || { echo "round $round: balloon_interleaved printed no result" >&2; exit 1; }
     ratios+=("$(field ratio "$r")"); median_ratios+=("$(field median_ratio "$r")")
     printf '%5s | %8.2f %8.2f %8.4f | %8.2f %8.2f %8.4f | %8.3f %8.3f\n' "$round" "$(field bullet_ms "$r")" \
@@ -73,6 +75,8 @@ if [ -n "$interleaved" ]; then
     print (NR % 2 ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2) }'; }
   printf '\nmedian over %s interleaved rounds of ours (2 threads) / Bullet: %s (mean step times), %s (median step times)\n' \
     "$rounds" "$(median "${ratios[@]}")" "$(median "${median_ratios[@]}")"
+  printf 'ours / Bullet per 100 steps (mean step times), round by round:\n'
+  printf '  %s\n' "${phases[@]}"
   printf 'load average at the end: %s\n' "$(cut -d' ' -f1-3 /proc/loadavg)"
   exit 0
 fi
