@@ -72,7 +72,10 @@
 //! - a matrix per axis from the springs' current blocks (each spring's weight its block's entry
 //!   on that axis, `h² a + (h² b + h K_d) u²`: directions and tension followed), with the
 //!   vertical one also without the vertices in contact: 5,118 (5,138 without that), the softest
-//!   value at step 45 0.02 -> 0.025.
+//!   value at step 45 0.02 -> 0.025;
+//! - each vertex's block with its springs' part scaled by θ (`m I + θ Σ K`), so that a vertex
+//!   that moves with its neighbours is not held as if they stood: θ = 0.85, 0.7 and 0.5 took
+//!   5,242, 5,139 and 5,315 (steps 30-179: 2,490 -> 2,504, 2,458 and 2,524).
 //!
 //! Deflating those soft modes (deflated PCG, Saad, Yeung, Erhel and Guyomarc'h 2000: the start
 //! and every search direction made A-orthogonal to a few vectors W) works only with the modes of
