@@ -526,7 +526,7 @@ impl Gas {
 
     /// The start of the parallel gathering ([`Gas::gradient_rows`] on every chunk of vertices,
     /// then [`Gas::finish_gradient`]): makes the corner lists on the first call after a topology
-    /// change; returns the fragments' origins.
+    /// change (see [`Gas::prepare_corners`]); returns the fragments' origins.
     pub fn prepare_gradient(
         &mut self,
         x: &[Vec3],
@@ -534,10 +534,24 @@ impl Gas {
         face_fragment: &[u32],
         n: usize,
     ) -> Vec<DVec3> {
+        self.prepare_corners(triangles, face_fragment, n);
+        self.origins(x)
+    }
+
+    /// Whether the corner lists are made for `n` vertices.
+    #[cfg(test)]
+    pub fn has_corners_for(&self, n: usize) -> bool {
+        self.corner_offsets.len() == n + 1
+    }
+
+    /// Makes the corner lists and rings of the gradient for the `n` vertices and `triangles`
+    /// unless they are made. A new body makes them before its first step (on the issue-5
+    /// balloon, 10,242 vertices, about 1 ms that the first step took on top of its own work);
+    /// after a topology change the next step does (the cracking step does not wait for them).
+    pub fn prepare_corners(&mut self, triangles: &[[u32; 3]], face_fragment: &[u32], n: usize) {
         if self.corner_offsets.len() != n + 1 {
             self.build_corners(triangles, face_fragment, n);
         }
-        self.origins(x)
     }
 
     /// `∂V/∂x` (without the caps' share) at the vertices `first..first + out.len()` into `out`
@@ -651,21 +665,30 @@ impl Gas {
                 Corner { next: t[(c + 1) % 3], prev: t[(c + 2) % 3], fragment: face_fragment[face] }
             })
             .collect();
+        // The rings first: a fan that walks as one ring is closed, and only the others (open
+        // fans and two cones meeting at a vertex, a few on most meshes) are compared sorted.
+        // (Every list is reused from vertex to vertex: see `FanRings::new`.)
+        let (offsets, corners) = (&self.corner_offsets, &self.corners);
+        let fan = |v: usize| &corners[offsets[v] as usize..offsets[v + 1] as usize];
+        self.rings = FanRings::new(n, |v, out| {
+            out.extend(fan(v).iter().map(|c| (c.next, c.prev)));
+            !out.is_empty()
+        });
+        let (mut next, mut prev) = (Vec::new(), Vec::new());
         self.closed_fan = (0..n)
             .map(|v| {
-                let fan = &self.corners[self.corner_offsets[v] as usize..self.corner_offsets[v + 1] as usize];
-                let mut next: Vec<u32> = fan.iter().map(|c| c.next).collect();
-                let mut prev: Vec<u32> = fan.iter().map(|c| c.prev).collect();
+                if self.rings.is_ring(v) {
+                    return true;
+                }
+                next.clear();
+                prev.clear();
+                next.extend(fan(v).iter().map(|c| c.next));
+                prev.extend(fan(v).iter().map(|c| c.prev));
                 next.sort_unstable();
                 prev.sort_unstable();
-                !fan.is_empty() && next == prev
+                !fan(v).is_empty() && next == prev
             })
             .collect();
-        let (offsets, corners, closed) = (&self.corner_offsets, &self.corners, &self.closed_fan);
-        self.rings = FanRings::new(n, |v| {
-            let fan = &corners[offsets[v] as usize..offsets[v + 1] as usize];
-            closed[v].then(|| fan.iter().map(|c| (c.next, c.prev)).collect())
-        });
         // The fragment of a vertex's fan is that of its first corner (`fan_has_gas`).
         let first_fragment = |v: usize| {
             let first = offsets[v] as usize;
@@ -909,6 +932,36 @@ mod tests {
 
     fn tetra() -> (Vec<Vec3>, Vec<[u32; 3]>) {
         (vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z], vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    }
+
+    /// A fan is closed when its faces' next and previous corners are the same lists (sorted),
+    /// and a ring when it closes one single ring: made by walking the rings first, both come
+    /// out as that definition says on open fans (a tetrahedron without a face), on two cones
+    /// meeting at a vertex (a second tetrahedron on vertex 0) and on fans that are rings.
+    #[test]
+    fn closed_fans_and_rings_follow_the_corners() {
+        let (_, a) = tetra();
+        // The second tetrahedron on vertices 0, 4, 5, 6; the first without its face [1, 2, 3].
+        let b: Vec<[u32; 3]> = a.iter().map(|f| f.map(|v| if v == 0 { 0 } else { v + 3 })).collect();
+        let t: Vec<[u32; 3]> = a.iter().chain(&b).copied().filter(|f| *f != [1, 2, 3]).collect();
+        let n = 7;
+        let mut gas = Gas::new(n, &t, &vec![0; t.len()], 1, &[]);
+        assert!(!gas.has_corners_for(n));
+        gas.prepare_corners(&t, &vec![0; t.len()], n);
+        assert!(gas.has_corners_for(n));
+        for v in 0..n as u32 {
+            let (mut next, mut prev): (Vec<u32>, Vec<u32>) = t
+                .iter()
+                .filter_map(|f| f.iter().position(|&i| i == v).map(|c| (f[(c + 1) % 3], f[(c + 2) % 3])))
+                .unzip();
+            next.sort_unstable();
+            prev.sort_unstable();
+            let closed = !next.is_empty() && next == prev;
+            assert_eq!(gas.closed_fan[v as usize], closed, "vertex {v}");
+            // Vertex 0 closes two rings (one per tetrahedron), 1-3 none, 4-6 one each.
+            assert_eq!(gas.rings.is_ring(v as usize), v >= 4, "vertex {v}");
+            assert_eq!(closed, v == 0 || v >= 4, "vertex {v}");
+        }
     }
 
     #[test]
