@@ -80,20 +80,13 @@ int main(int argc, char** argv) {
     return 2;
   }
   const int steps = quick ? 200 : 600;
-  const double dt = 1.0 / 60.0;
-  const double n_rt = 2500.0;
+  const double dt = peer::kTimeStep;
+  const double n_rt = peer::kGas;
 
   std::vector<float> positions;
   std::vector<uint32_t> triangles;
-  peer::icosphere(5, 1.0f, positions, triangles);
+  const double v0 = peer::dropped_balloon(positions, triangles);
   const size_t n = positions.size() / 3;
-  // Dropped from 1.5 m: the same float addition to every y as body_balloon.rs.
-  for (size_t i = 0; i < n; ++i) positions[3 * i + 1] += 2.5f;
-  const double v0 = peer::volume(
-      [&](uint32_t i) {
-        return std::array<double, 3>{positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]};
-      },
-      triangles);
 
   peer::BulletBalloon bullet(positions, triangles, false, -1.0f, 5, n_rt);
 

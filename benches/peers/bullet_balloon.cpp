@@ -32,7 +32,6 @@
 #include <string>
 #include <vector>
 
-using peer::icosphere;
 using peer::thread_cpu_seconds;
 using peer::volume;
 
@@ -56,20 +55,13 @@ int main(int argc, char** argv) {
     }
   }
   const int steps = quick ? 200 : 600;
-  const double dt = 1.0 / 60.0;
-  const double n_rt = 2500.0;
+  const double dt = peer::kTimeStep;
+  const double n_rt = peer::kGas;
 
   std::vector<float> positions;
   std::vector<uint32_t> triangles;
-  icosphere(5, 1.0f, positions, triangles);
+  const double v0 = peer::dropped_balloon(positions, triangles);
   const int n = static_cast<int>(positions.size() / 3);
-  // Dropped from 1.5 m as in body_balloon.rs: the same float addition to every y.
-  for (int i = 0; i < n; ++i) positions[3 * i + 1] += 2.5f;
-  const double v0 = volume(
-      [&](uint32_t i) {
-        return std::array<double, 3>{positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]};
-      },
-      triangles);
 
   peer::BulletBalloon scene(positions, triangles, zero_g, margin, iterations, n_rt);
   btSoftRigidDynamicsWorld& world = scene.world;

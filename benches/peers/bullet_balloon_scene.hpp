@@ -91,6 +91,22 @@ inline double thread_cpu_seconds() {
   return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
+// The time step and the gas nRT of the scene (body_balloon.rs's).
+constexpr double kTimeStep = 1.0 / 60.0;
+constexpr double kGas = 2500.0;
+
+// The scene's mesh as body_balloon.rs makes it: icosphere(5, 1) (10,242 vertices) dropped from
+// 1.5 m (its lowest point; the same float addition to every y). Returns its volume V0.
+inline double dropped_balloon(std::vector<float>& positions, std::vector<uint32_t>& triangles) {
+  icosphere(5, 1.0f, positions, triangles);
+  for (size_t i = 0; i < positions.size() / 3; ++i) positions[3 * i + 1] += 2.5f;
+  return volume(
+      [&](uint32_t i) {
+        return std::array<double, 3>{positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]};
+      },
+      triangles);
+}
+
 // The soft body and its world: a static ground (unless `zero_g`), the balloon made from
 // `positions` (already placed) and `triangles` with gas nRT = `n_rt`, the soft body's collision
 // margin `margin` (< 0: Bullet's own) and `iterations` position iterations.
