@@ -37,9 +37,10 @@ pub(crate) struct FanRings {
 
 impl FanRings {
     /// The rings of `n` vertices; `fan(v, out)` puts into `out` (empty) the (next, previous)
-    /// corners of the faces around v (in their winding) and returns true when v's fan is
-    /// closed, else false. A fan that is closed but is no single ring (two cones meeting at v)
-    /// gets no ring.
+    /// corners of the faces around v (in their winding) and returns whether to walk them: a fan
+    /// that walks as one single ring gets it (every such fan is closed: the walk visits each
+    /// corner once); an open fan or one that is closed but no single ring (two cones meeting at
+    /// v) gets none.
     ///
     /// The corners and the rings go into buffers made once for all vertices: with a few vectors
     /// allocated per vertex, this and the fans' closure test (`Gas`) took about 4 ms on the

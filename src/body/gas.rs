@@ -545,9 +545,10 @@ impl Gas {
     }
 
     /// Makes the corner lists and rings of the gradient for the `n` vertices and `triangles`
-    /// unless they are made. A new body makes them before its first step (on the issue-5
-    /// balloon, 10,242 vertices, about 1 ms that the first step took on top of its own work);
-    /// after a topology change the next step does (the cracking step does not wait for them).
+    /// unless they are made (only the implicit integrator's parallel gathering uses them). A new
+    /// body stepped by it makes them before its first step (on the issue-5 balloon, 10,242
+    /// vertices, about 1 ms that the first step took on top of its own work); after a topology
+    /// change the next step does (the cracking step does not wait for them).
     pub fn prepare_corners(&mut self, triangles: &[[u32; 3]], face_fragment: &[u32], n: usize) {
         if self.corner_offsets.len() != n + 1 {
             self.build_corners(triangles, face_fragment, n);
