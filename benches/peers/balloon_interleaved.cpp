@@ -18,7 +18,8 @@
 // BLOCK_POSITIONS=1 in the environment also prints each side's mean step time by the step's
 // place in its block (the first step of a block starts with the other's data in the caches and,
 // for softshell, its worker asleep).
-// The last line is machine-readable ("RESULT key=value ...") for the script.
+// The last line is machine-readable ("RESULT key=value ...") for the script; nan=1 (and exit
+// status 1) when Bullet's nodes became non-finite.
 
 #include "bullet_balloon_scene.hpp"
 
@@ -123,14 +124,24 @@ int main(int argc, char** argv) {
   our_times.seconds.reserve(steps);
   std::vector<double> bullet_ratios, our_ratios;
   int failed_at = -1;
+  int bullet_nan = -1;  // the first step whose nodes Bullet left non-finite
   auto run_bullet = [&](int from, int to) {
     for (int k = from; k < to; ++k) {
       const auto start = std::chrono::steady_clock::now();
       bullet.world.stepSimulation(btScalar(dt), 0);
       bullet_times.seconds.push_back(
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+      const btSoftBody::tNodeArray& nodes = bullet.body->m_nodes;
+      if (bullet_nan < 0) {
+        for (int i = 0; i < nodes.size(); ++i) {
+          const btVector3& p = nodes[i].m_x;
+          if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z())) {
+            bullet_nan = k;
+            break;
+          }
+        }
+      }
       if (k >= steps - 100) {
-        const btSoftBody::tNodeArray& nodes = bullet.body->m_nodes;
         bullet_ratios.push_back(peer::volume(
                                     [&](uint32_t i) {
                                       const btVector3& p = nodes[static_cast<int>(i)].m_x;
@@ -195,12 +206,13 @@ int main(int argc, char** argv) {
         o += our_times.seconds[i];
         b += bullet_times.seconds[i];
       }
-      std::printf("position %d in block: ours %.3f ms, Bullet %.3f ms\n", k, o / c * 1e3, b / c * 1e3);
+      if (c > 0) std::printf("position %d in block: ours %.3f ms, Bullet %.3f ms\n", k, o / c * 1e3, b / c * 1e3);
     }
   }
+  if (bullet_nan >= 0) std::printf("Bullet's nodes are not finite from step %d\n", bullet_nan);
   std::printf("RESULT bullet_ms=%.4f bullet_median=%.4f ours_ms=%.4f ours_median=%.4f ratio=%.4f median_ratio=%.4f "
-              "bullet_settled=%.5f ours_settled=%.5f\n",
+              "bullet_settled=%.5f ours_settled=%.5f nan=%d\n",
               bullet_mean, bullet_median, our_mean, our_median, our_mean / bullet_mean, our_median / bullet_median,
-              mean_of(bullet_ratios), mean_of(our_ratios));
-  return 0;
+              mean_of(bullet_ratios), mean_of(our_ratios), bullet_nan < 0 ? 0 : 1);
+  return bullet_nan < 0 ? 0 : 1;
 }

@@ -30,6 +30,7 @@ for arg in "$@"; do
     *) rounds=$arg ;;
   esac
 done
+[ "$rounds" -ge 1 ] || { echo "rounds must be at least 1" >&2; exit 2; }
 
 if ! dpkg -s libbullet-dev >/dev/null 2>&1; then
   sudo=""; [ "$(id -u)" -eq 0 ] || sudo="sudo"
@@ -52,20 +53,27 @@ g++ -std=c++17 -O2 -Wall -Wextra -o "$bullet" benches/peers/bullet_balloon.cpp $
 if [ -n "$interleaved" ]; then
   [ -z "$zerog" ] || { echo "interleaved runs the drop only, not zerog" >&2; exit 2; }
   cargo build --release --lib
+  # The library where cargo put it (CARGO_TARGET_DIR or a cargo config may move it).
+  libdir=$(cargo metadata --format-version 1 --no-deps | sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')/release
+  [ -f "$libdir/libsoftshell.so" ] || { echo "no libsoftshell.so in $libdir" >&2; exit 1; }
   interleaved_bin=target/peers/balloon_interleaved
   # shellcheck disable=SC2086 # the flags are lists of words
   g++ -std=c++17 -O2 -Wall -Wextra -o "$interleaved_bin" benches/peers/balloon_interleaved.cpp -Iinclude \
-    $bullet_cflags $bullet_libs -Ltarget/release -Wl,-rpath,"$PWD/target/release" -lsoftshell
+    $bullet_cflags $bullet_libs -L"$libdir" -Wl,-rpath,"$libdir" -lsoftshell
   printf 'machine: %s cores, load average %s\n' "$(nproc)" "$(cut -d' ' -f1-3 /proc/loadavg)"
   printf '%5s | %-26s | %-26s | %s\n' round "Bullet (1 thread)" "ours, 2 threads (default)" "ours / Bullet"
   printf '%5s | %8s %8s %8s | %8s %8s %8s | %8s %8s\n' "" ms/step median V/V0 ms/step median V/V0 mean median
   ratios=(); median_ratios=(); phases=()
-  field() { sed "s/.* $1=\([^ ]*\).*/\1/" <<<"$2"; }
+  field() { sed "s/.* $1=\([^ ]*\).*/\1/" <<<"$2"; } # the value of key $1 in the RESULT line $2
   for round in $(seq 1 "$rounds"); do
     out=$("$interleaved_bin" $quick || true)
     r=$(grep '^RESULT' <<<"$out" || true)
     phases+=("$(sed -n 's/^per 100 steps, softshell \/ Bullet (mean step times): //p' <<<"$out")")
-    [ -n "$r" ] || { echo "round $round: balloon_interleaved printed no result" >&2; exit 1; }
+    [ -n "$r" ] || { echo "round $round: balloon_interleaved printed no result:" >&2; echo "$out" >&2; exit 1; }
+    for key in bullet_ms bullet_median bullet_settled ours_ms ours_median ours_settled ratio median_ratio nan; do
+      grep -q " $key=" <<<"$r" || { echo "round $round: no $key in: $r" >&2; exit 1; }
+    done
+    [ "$(field nan "$r")" = 0 ] || echo "round $round: Bullet's balloon produced NaN" >&2
     ratios+=("$(field ratio "$r")"); median_ratios+=("$(field median_ratio "$r")")
     printf '%5s | %8.2f %8.2f %8.4f | %8.2f %8.2f %8.4f | %8.3f %8.3f\n' "$round" "$(field bullet_ms "$r")" \
       "$(field bullet_median "$r")" "$(field bullet_settled "$r")" "$(field ours_ms "$r")" \
