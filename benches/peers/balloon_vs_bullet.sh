@@ -50,6 +50,10 @@ bullet=target/peers/bullet_balloon
 # shellcheck disable=SC2086 # the flags are lists of words
 g++ -std=c++17 -O2 -Wall -Wextra -o "$bullet" benches/peers/bullet_balloon.cpp $bullet_cflags $bullet_libs
 
+# The median of the arguments ("-" for none).
+median() { [ $# -gt 0 ] || { echo -; return; }; printf '%s\n' "$@" | sort -g | awk '{ v[NR] = $1 } END {
+  print (NR % 2 ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2) }'; }
+
 if [ -n "$interleaved" ]; then
   [ -z "$zerog" ] || { echo "interleaved runs the drop only, not zerog" >&2; exit 2; }
   cargo build --release --lib
@@ -79,8 +83,6 @@ if [ -n "$interleaved" ]; then
       "$(field bullet_median "$r")" "$(field bullet_settled "$r")" "$(field ours_ms "$r")" \
       "$(field ours_median "$r")" "$(field ours_settled "$r")" "$(field ratio "$r")" "$(field median_ratio "$r")"
   done
-  median() { printf '%s\n' "$@" | sort -g | awk '{ v[NR] = $1 } END {
-    print (NR % 2 ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2) }'; }
   printf '\nmedian over %s interleaved rounds of ours (2 threads) / Bullet: %s (mean step times), %s (median step times)\n' \
     "$rounds" "$(median "${ratios[@]}")" "$(median "${median_ratios[@]}")"
   printf 'ours / Bullet per 100 steps (mean step times), round by round:\n'
@@ -153,8 +155,6 @@ for round in $(seq 1 "$rounds"); do
     "$b_vol" "$o_ms" "${o_med:--}" "$o_vol" "${o1_ms:--}" "$ratio" "$median_ratio" \
     "$([ "$b_nan" = 0 ] || echo '  (Bullet produced NaN)')"
 done
-median() { [ $# -gt 0 ] || { echo -; return; }; printf '%s\n' "$@" | sort -g | awk '{ v[NR] = $1 } END {
-  print (NR % 2 ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2) }'; }
 printf '\nmedian over %s rounds of ours (2 threads) / Bullet: %s (mean step times), %s (median step times)\n' \
   "$rounds" "$(median "${ratios[@]}")" "$(median "${median_ratios[@]}")"
 # The fastest round of each side (other processes on a shared machine only ever add time, and
