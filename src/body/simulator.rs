@@ -1049,11 +1049,20 @@ impl Body {
         result
     }
 
-    /// Net internal force (springs, damping, gas) on every vertex at the current state.
+    /// Net internal force (springs, damping, gas) on every vertex at the current state; for an
+    /// XPBD body the forces its constraints applied in the last substep
+    /// ([`xpbd::add_applied_forces`]: its positions are not those of converged spring and gas
+    /// laws).
     fn internal_forces(&mut self) -> Vec<Vec3> {
         let n = self.nodes.len();
         let mut f = vec![Vec3::ZERO; n];
         let model = model_of!(self);
+        if let Scratch::Xpbd(s) = &mut self.scratch {
+            let h = self.settings.time_step / self.settings.substeps.max(1) as f32;
+            if xpbd::add_applied_forces(&model, self.gas.as_mut(), &self.nodes.x, h, s, &mut f) {
+                return f;
+            }
+        }
         add_spring_forces(&model, &self.nodes.x, &self.nodes.v, &mut f);
         if let Some(gas) = self.gas.as_mut() {
             let mut gradient = vec![Vec3::ZERO; n];
