@@ -91,7 +91,12 @@ pub struct SoftshellBodyDef {
     pub ground: bool,
     /// Height of the ground plane, m, in [-1e9, 1e9]. Default 0.
     pub ground_height: f32,
-    /// Restitution of contacts with the ground and obstacles, in [0, 1]. Default 0.
+    /// Restitution of contacts with the ground and obstacles, in [0, 1]. Default 0. It acts on
+    /// each vertex at its contact (its normal speed out is this times its speed in): a body that
+    /// lands flat leaves at that fraction of its speed, but a soft ball's bottom vertices land one
+    /// after the other, and one thrown back into the falling rest meets the ground again, losing
+    /// speed each time, so a soft ball may rise less with a high restitution than with 0 (its
+    /// bounce comes from its own springs and gas).
     pub restitution: f32,
     /// Coulomb friction coefficient of contacts, in [0, 1000]. Default 0.5.
     pub friction: f32,
