@@ -660,9 +660,17 @@ impl Body {
         let h_max = self.stable_time_step();
         let implicit = matches!(self.settings.integrator, Integrator::ImplicitEuler | Integrator::Xpbd);
         let advice = if implicit {
+            // No bound of their own to estimate in advance: they fail only where one step's
+            // linearisation (implicit Euler) or projection (XPBD) moves vertices too far, so
+            // halve the step and try again.
+            let substeps = 2 * self.settings.substeps.max(1);
             format!(
-                "this step used h = {h:.3e} s; raise substeps or lower time_step (the explicit integrators would need \
-                 h below about {h_max:.3e} s)"
+                "this step used h = {h:.3e} s; try substeps >= {substeps} (h = {:.3e} s) or a smaller time_step: \
+                 {} has no stable time step that can be estimated in advance (it fails where one step moves vertices \
+                 too far for its linearised springs and gas); the explicit integrators would need h below about \
+                 {h_max:.3e} s",
+                h / 2.0,
+                self.integrator_name()
             )
         } else if h_max <= 0.0 {
             format!(
@@ -1674,6 +1682,8 @@ mod tests {
         let (step, message) = failed.expect("12 steps, each overshooting threefold, all returned OK");
         println!("step {step}: {message}");
         assert!(message.contains("the energy made without a source"), "another test failed the step: {message}");
+        // The advice: half the step (one substep here).
+        assert!(message.contains("try substeps >= 2 (h = 8.333e-3 s)"), "{message}");
         for _ in 0..=step {
             control.step().unwrap();
         }
