@@ -299,7 +299,9 @@ typedef struct SoftshellBodyStats {
   // Enclosed volume, m^3: the sum over the pieces that hold gas (holes capped), or the signed
   // volume of the mesh without gas.
   double volume;
-  // Mean gas pressure (total nRT / total volume), Pa; 0 without gas.
+  // Mean gas pressure (total nRT / total volume), Pa; 0 without gas. A piece whose volume is
+  // clamped (`volume_clamped`) counts with its clamped volume: the pressure the gas pushes
+  // with, which stops growing there.
   double pressure;
   // Kinetic energy, J.
   double kinetic_energy;

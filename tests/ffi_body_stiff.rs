@@ -309,3 +309,55 @@ fn xpbd_takes_the_softest_springs_allowed() {
         }
     }
 }
+
+/// A gas ball squeezed flat between two planes 2 mm apart (SPEC 2.2 clamp): its volume falls
+/// under the clamp (1% of the volume it was made with), the step reports `volume_clamped` and
+/// the pressure the gas pushes with, stopped at nRT over the clamp (the pressure of the volume
+/// itself, twice that here, pushes nothing), and every step stays finite, with each stable
+/// integrator.
+#[test]
+fn a_ball_squeezed_flat_reports_its_clamped_volume() {
+    let (positions, triangles) = icosphere(3, 0.5);
+    let v0 = Mesh::new(&positions, &triangles).report().volume;
+    for (integrator, substeps) in [
+        (SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1),
+        (SOFTSHELL_INTEGRATOR_XPBD, 1),
+        (SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, 50),
+    ] {
+        let mut def = softshell_body_def_default();
+        def.integrator = integrator;
+        def.substeps = substeps;
+        def.gravity = [0.0; 3];
+        def.gas_amount = 10.0;
+        let body = body(&positions, &triangles, &def);
+        // Half-spaces y <= 1 mm and y >= -1 mm: the body starts flattened onto them.
+        for (point, normal) in [([0.0f32, 0.001, 0.0], [0.0f32, -1.0, 0.0]), ([0.0, -0.001, 0.0], [0.0, 1.0, 0.0])] {
+            // SAFETY: live body, float[3] each.
+            let status = unsafe { softshell_body_add_plane_obstacle(body.0, point.as_ptr(), normal.as_ptr()) };
+            assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+        }
+        let mut clamped_steps = 0;
+        let mut highest_pressure = 0.0f64;
+        for k in 0..30 {
+            let stats = step(&body);
+            assert!(stats.volume.is_finite() && stats.pressure.is_finite(), "step {k}: {stats:?}");
+            let s = snapshot(&body);
+            assert!(s.positions.iter().all(|p| p.is_finite()), "step {k}");
+            if stats.volume_clamped {
+                clamped_steps += 1;
+                assert!(stats.volume < 0.01 * v0 * 1.01, "step {k}: clamped at V = {} m^3", stats.volume);
+            }
+            highest_pressure = highest_pressure.max(stats.pressure);
+        }
+        println!(
+            "integrator {integrator}: {clamped_steps} of 30 steps clamped, highest pressure {highest_pressure:.1} Pa"
+        );
+        assert!(clamped_steps > 0, "integrator {integrator}: a ball 2 mm thick never reported its clamped volume");
+        // nRT / (1% of V0), the clamp's pressure (reported as the pressure that pushes).
+        let clamp_pressure = 10.0 / (0.01 * v0);
+        assert!(
+            (highest_pressure / clamp_pressure - 1.0).abs() < 1e-4,
+            "integrator {integrator}: {highest_pressure} Pa, the clamp's {clamp_pressure} Pa"
+        );
+    }
+}

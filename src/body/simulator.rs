@@ -33,7 +33,8 @@ pub struct BodyStats {
     pub time: f64,
     /// Total (capped) volume of the fragments with gas, or the signed volume without gas, m^3.
     pub volume: f64,
-    /// Mean gas pressure `Σ nRT / Σ V` over the fragments with gas, Pa.
+    /// Mean gas pressure `Σ nRT / Σ max(V, V_min)` over the fragments with gas (each volume
+    /// clamped as in its force), Pa.
     pub pressure: f64,
     /// Kinetic energy, J.
     pub kinetic_energy: f64,
@@ -1290,8 +1291,11 @@ impl Body {
             Some(gas) => {
                 let with_gas = (0..gas.fragment_count()).filter(|&f| gas.n_rt[f] > 0.0);
                 let volume: f64 = with_gas.clone().map(|f| gas.volume[f]).sum();
+                // The pressure the gas pushes with: each piece's volume clamped as in its force
+                // (`Gas::pressure`), so a squeezed piece reports the pressure it stopped at.
+                let pushing_volume: f64 = with_gas.clone().map(|f| gas.volume[f].max(gas.v_min[f])).sum();
                 let n_rt: f64 = with_gas.map(|f| gas.n_rt[f]).sum();
-                (volume, if volume > 0.0 { n_rt / volume } else { 0.0 })
+                (volume, if pushing_volume > 0.0 { n_rt / pushing_volume } else { 0.0 })
             }
             None => (crate::mesh::signed_volume(&self.nodes.x, &self.triangles), 0.0),
         };

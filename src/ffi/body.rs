@@ -121,7 +121,9 @@ pub struct SoftshellBodyStats {
     /// Enclosed volume, m^3: the sum over the pieces that hold gas (holes capped), or the signed
     /// volume of the mesh without gas.
     pub volume: f64,
-    /// Mean gas pressure (total nRT / total volume), Pa; 0 without gas.
+    /// Mean gas pressure (total nRT / total volume), Pa; 0 without gas. A piece whose volume is
+    /// clamped (`volume_clamped`) counts with its clamped volume: the pressure the gas pushes
+    /// with, which stops growing there.
     pub pressure: f64,
     /// Kinetic energy, J.
     pub kinetic_energy: f64,
