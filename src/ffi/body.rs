@@ -34,13 +34,13 @@ pub const SOFTSHELL_INTEGRATOR_IMPLICIT_EULER: u32 = 2;
 /// XPBD: springs as distance constraints with compliance 1/K_s, gas as a volume constraint;
 /// `iterations` Gauss-Seidel sweeps per substep. Its springs are as stiff as K_s only as far as
 /// those sweeps converge, so with few of them a body whose gas or weight is large for its mass
-/// comes out far softer, though finite: the issue-5 balloon (benches/body_balloon.rs) dropped on
-/// the ground swings about V/V0 1.69 (1.50-1.78) with 5 substeps of 2 sweeps and about 1.05
-/// (1.03-1.07) with 10 of 10 (over its last 100 of 600 steps), where
-/// implicit Euler settles at 1.0235; a 10 g ball of K_s 1e7 with gas 10 J dropped on the ground
-/// keeps springs stretched by 143% with the default 1 substep of 10 sweeps, and under 5% with
-/// 20 substeps at 1/60 s (80 at 1/15 s; tests/ffi_body_stiff.rs). Raise `substeps` (more
-/// effective than `iterations`), or use implicit Euler.
+/// comes out far softer, though finite. The issue-5 balloon (benches/body_balloon.rs) dropped on
+/// the ground swings about V/V0 1.69 (1.50-1.78 over its last 100 of 600 steps) with 5 substeps
+/// of 2 sweeps and about 1.05 (1.03-1.07) with 10 of 10, where implicit Euler settles at 1.0235.
+/// A 10 g ball of K_s 1e7 with gas 10 J resting on the ground keeps springs stretched by 143%
+/// with the default 1 substep of 10 sweeps; falling freely with 20 substeps at 1/60 s (80 at
+/// 1/15 s) under 5% (tests/ffi_body_stiff.rs). Raise `substeps` (more effective than
+/// `iterations`), or use implicit Euler.
 pub const SOFTSHELL_INTEGRATOR_XPBD: u32 = 3;
 
 const INTEGRATORS: &str = "SOFTSHELL_INTEGRATOR_EXPLICIT_EULER (0), SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER (1), \
