@@ -177,20 +177,27 @@ fn a_core_block_on_a_large_body_is_in_the_callers_numbering() {
     }
 }
 
-/// A limit the gas and a blow exceed (1 N, gas 10 in a ball of 12 or 42 vertices): vertices are
-/// cut out, but a block releases no block of its own. A review saw blocks cut out of blocks at
-/// every step (a tetrahedron grew to 462,903 vertices in 26 steps). Each input vertex releases at
-/// most one block (its ring's copies and two centres: at most valence + 2 new vertices), so the
-/// body stays within that bound, valid after every step, and then stops changing.
+/// A limit the gas and a blow exceed (gas 10 in a ball of 12 vertices at 1 N with implicit
+/// Euler, of 42 vertices at 0.1 and 0.03 N with XPBD: 3, 31 and 40 blocks): vertices are cut
+/// out, but a block releases no block of its own. A review saw blocks cut out of blocks at every
+/// step (a tetrahedron grew to 462,903 vertices in 26 steps). Each input vertex releases at most
+/// one block (its ring's copies and two centres: at most valence + 2 new vertices), so the body
+/// stays within that bound, valid after every step (every step OK), and then stops changing.
+/// (XPBD's limits are lower since its loads are the forces it applied: see
+/// `an_xpbd_body_is_loaded_by_the_forces_it_applied`.)
 #[test]
 fn core_blocks_release_no_blocks_of_their_own() {
-    for (levels, integrator) in [(0, SOFTSHELL_INTEGRATOR_IMPLICIT_EULER), (1, SOFTSHELL_INTEGRATOR_XPBD)] {
+    for (levels, integrator, limit) in [
+        (0, SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 1.0),
+        (1, SOFTSHELL_INTEGRATOR_XPBD, 0.1),
+        (1, SOFTSHELL_INTEGRATOR_XPBD, 0.03),
+    ] {
         let (positions, triangles) = icosphere(levels, 0.5);
         let n = positions.len() / 3;
         let mut def = softshell_body_def_default();
         def.integrator = integrator;
         def.gas_amount = 10.0;
-        def.break_force = 1.0;
+        def.break_force = limit;
         let body = body(&positions, &triangles, &def);
         let blow = [0.05f32, 0.1, -0.02];
         // SAFETY: live body, float[3].
@@ -199,13 +206,7 @@ fn core_blocks_release_no_blocks_of_their_own() {
         let (mut released, mut last_generation) = (0u64, 0u64);
         let mut quiet_steps = 0;
         for k in 0..60 {
-            let stats = match try_step(&body) {
-                Ok(stats) => stats,
-                Err((status, message)) => {
-                    assert_eq!(status, SoftshellStatus::Unstable, "{message}");
-                    break;
-                }
-            };
+            let stats = try_step(&body).unwrap_or_else(|(status, message)| panic!("step {k}: {status:?}: {message}"));
             released += stats.cores_released;
             assert!(stats.vertex_count <= bound, "step {k}: {} vertices (bound {bound})", stats.vertex_count);
             assert!(released <= n as u64, "step {k}: {released} blocks from {n} vertices");
@@ -215,7 +216,7 @@ fn core_blocks_release_no_blocks_of_their_own() {
         }
         assert!(released > 0, "the limit must release blocks");
         assert!(quiet_steps >= 10, "the releases must stop: still changing at the end ({released} blocks)");
-        println!("{levels} levels, integrator {integrator}: {released} blocks released");
+        println!("{levels} levels, integrator {integrator}, limit {limit} N: {released} blocks released of {n}");
     }
 }
 
