@@ -1058,20 +1058,29 @@ impl Body {
         result
     }
 
-    /// Net internal force (springs, damping, gas) on every vertex at the current state; for an
-    /// XPBD body the forces its constraints applied in the last substep
-    /// ([`xpbd::add_applied_forces`]: its positions are not those of converged spring and gas
-    /// laws).
-    fn internal_forces(&mut self) -> Vec<Vec3> {
-        let n = self.nodes.len();
-        let mut f = vec![Vec3::ZERO; n];
-        let model = model_of!(self);
+    /// The load of every vertex at the end of a step, for `break_force` (SPEC 2.4): the net
+    /// internal force ([`Body::internal_forces`]), but for an XPBD body the forces its
+    /// constraints applied in the step's last substep ([`xpbd::add_applied_forces`]: its
+    /// positions are not those of converged spring and gas laws).
+    fn loads(&mut self) -> Vec<Vec3> {
         if let Scratch::Xpbd(s) = &mut self.scratch {
+            let mut f = vec![Vec3::ZERO; self.nodes.len()];
+            let model = model_of!(self);
             let h = self.settings.time_step / self.settings.substeps.max(1) as f32;
             if xpbd::add_applied_forces(&model, self.gas.as_mut(), &self.nodes.x, h, s, &mut f) {
                 return f;
             }
         }
+        self.internal_forces()
+    }
+
+    /// Net internal force (springs, damping, gas) on every vertex at the current state, by the
+    /// spring and gas laws (also for XPBD: the divergence test's bound, [`Body::impulse_bound`],
+    /// is the kinetic energy these laws give from rest, whatever an integrator applied).
+    fn internal_forces(&mut self) -> Vec<Vec3> {
+        let n = self.nodes.len();
+        let mut f = vec![Vec3::ZERO; n];
+        let model = model_of!(self);
         add_spring_forces(&model, &self.nodes.x, &self.nodes.v, &mut f);
         if let Some(gas) = self.gas.as_mut() {
             let mut gradient = vec![Vec3::ZERO; n];
@@ -1122,7 +1131,7 @@ impl Body {
         let mut cores = Vec::new();
         if self.settings.break_force > 0.0 {
             let limit = self.settings.break_force;
-            let f = self.internal_forces();
+            let f = self.loads();
             let fracture = self.fracture.as_ref();
             cores = f
                 .iter()
@@ -1396,6 +1405,35 @@ mod tests {
     /// The gas ball dropped on the ground.
     fn ball(threads: u32) -> Body {
         implicit_gas_ball(BodySettings { ground: true, ground_height: -1.2, threads, ..BodySettings::default() })
+    }
+
+    /// An XPBD body's loads (`break_force`) are the forces its last substep applied, not the
+    /// spring and gas laws at its positions; the divergence test's bound stays with the laws: it
+    /// is the same with the multipliers and without them, while the loads change.
+    #[test]
+    fn xpbd_loads_follow_the_multipliers_and_the_divergence_bound_the_laws() {
+        let mesh = sphere(2);
+        let topology = Topology::build(mesh.triangles(), mesh.positions().len());
+        let settings = BodySettings {
+            integrator: Integrator::Xpbd,
+            gas_amount: 200.0,
+            gravity: Vec3::ZERO,
+            ..BodySettings::default()
+        };
+        let mut body = Body::new(&mesh, &topology, settings).unwrap();
+        for _ in 0..3 {
+            body.step().unwrap();
+        }
+        let h = body.settings.time_step;
+        let (applied, bound) = (body.loads(), body.impulse_bound(h));
+        let Scratch::Xpbd(s) = &mut body.scratch else { unreachable!() };
+        s.forget_multipliers();
+        let (laws, bound_without) = (body.loads(), body.impulse_bound(h));
+        assert_eq!(laws, body.internal_forces(), "without multipliers the loads are the laws'");
+        let largest = |f: &[Vec3]| f.iter().map(|f| f.length()).fold(0.0f32, f32::max);
+        println!("largest load: applied {:.3e} N, by the laws {:.3e} N", largest(&applied), largest(&laws));
+        assert!(applied.iter().zip(&laws).any(|(a, b)| (*a - *b).length() > 1e-3 * largest(&laws)));
+        assert_eq!(bound, bound_without, "the divergence bound must not read the multipliers");
     }
 
     /// A body with gas stepped by implicit Euler makes its gas's corner lists when it is made,

@@ -28,6 +28,13 @@ pub(crate) struct XpbdScratch {
 }
 
 impl XpbdScratch {
+    /// Drops the last substep's multipliers (as if no substep had run since a topology change).
+    #[cfg(test)]
+    pub fn forget_multipliers(&mut self) {
+        self.lambda.clear();
+        self.gas_lambda.clear();
+    }
+
     pub fn memory_bytes(&self) -> usize {
         (self.force.capacity() + self.gradient.capacity() + self.previous.capacity()) * 12
             + self.lambda.capacity() * 4
