@@ -361,3 +361,37 @@ fn a_ball_squeezed_flat_reports_its_clamped_volume() {
         );
     }
 }
+
+/// Advice the def can take: when a stable step needs more substeps than the most allowed
+/// (`substeps` in [1, 1000]), the UNSTABLE message asks for a shorter `time_step` with 1000
+/// substeps instead (a review saw it ask for more than 1000, which `softshell_body_new`
+/// refuses), and that def is accepted and steps stably. Symplectic Euler on the body of
+/// `following_the_unstable_advice_is_stable` with steps of 1 s.
+#[test]
+fn advice_beyond_the_most_substeps_shortens_the_time_step() {
+    let (p, t) = icosphere(3, 0.5);
+    let mut def = softshell_body_def_default();
+    def.integrator = SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER;
+    def.time_step = 1.0;
+    let b = body(&p, &t, &def);
+    shake(&b, p.len() / 3, 1e-5);
+    let (status, message) = try_step(&b).expect_err("h = 1 s is far too long");
+    assert_eq!(status, SoftshellStatus::Unstable);
+    assert!(!message.contains("substeps >="), "{message}");
+    let time_step: f32 = message
+        .split("time_step <= ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no time_step advice: {message}"));
+    assert!(message.contains("with substeps = 1000"), "{message}");
+    println!("advice: time_step {time_step} s with 1000 substeps ({message})");
+    def.time_step = time_step;
+    def.substeps = 1000;
+    let b = body(&p, &t, &def);
+    shake(&b, p.len() / 3, 1e-5);
+    for k in 0..5 {
+        let stats = try_step(&b).unwrap_or_else(|(status, m)| panic!("step {k} as advised: {status:?}: {m}"));
+        assert!(stats.kinetic_energy.is_finite());
+    }
+}

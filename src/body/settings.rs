@@ -17,13 +17,17 @@ pub enum Integrator {
     Xpbd,
 }
 
+/// The most substeps a step may take (the C ABI refuses more; the advice of an UNSTABLE step
+/// never asks for more).
+pub const MAX_SUBSTEPS: u32 = 1000;
+
 /// Settings of a [`crate::body::Body`]. Validated by the caller (the C boundary checks ranges);
 /// [`crate::body::Body::new`] checks what depends on the mesh.
 #[derive(Clone, Debug)]
 pub struct BodySettings {
     /// Step length h, s.
     pub time_step: f32,
-    /// Substeps per step (each of h / substeps).
+    /// Substeps per step (each of h / substeps), at most [`MAX_SUBSTEPS`] through the C ABI.
     pub substeps: u32,
     /// XPBD Gauss-Seidel iterations per substep; cap on conjugate-gradient iterations / 10 for
     /// the implicit integrator.

@@ -14,7 +14,7 @@ use super::forces::{Model, add_gas_forces, add_spring_forces};
 use super::gas::Gas;
 use super::implicit::{self, ImplicitScratch};
 use super::obstacles::{Obstacle, project, resolve};
-use super::settings::{BodySettings, Integrator};
+use super::settings::{BodySettings, Integrator, MAX_SUBSTEPS};
 use super::springs::{Springs, spring_strain};
 use super::surface::{Fracture, Nodes, build_springs, rebuild_springs};
 use super::vertex_order::VertexOrder;
@@ -656,6 +656,22 @@ impl Body {
         }
     }
 
+    /// How to step with substeps of at most `h`: "substeps >= N" when N is allowed
+    /// ([`MAX_SUBSTEPS`]), else a `time_step` that many substeps bring to `h`.
+    fn smaller_steps_advice(&self, h: f64) -> String {
+        let time_step = self.settings.time_step as f64;
+        // (Less a hair: twice the substeps of a step must read as exactly that.)
+        let substeps = (time_step / h * (1.0 - 1e-9)).ceil().max(1.0);
+        if substeps <= MAX_SUBSTEPS as f64 {
+            format!("substeps >= {substeps} (h = {:.3e} s)", time_step / substeps)
+        } else {
+            format!(
+                "time_step <= {:.3e} s with substeps = {MAX_SUBSTEPS} (the most allowed; h = {h:.3e} s)",
+                h * MAX_SUBSTEPS as f64
+            )
+        }
+    }
+
     fn unstable(&self, what: String) -> Error {
         let h = self.settings.time_step as f64 / self.settings.substeps as f64;
         let h_max = self.stable_time_step();
@@ -664,13 +680,11 @@ impl Body {
             // No bound of their own to estimate in advance: they fail only where one step's
             // linearisation (implicit Euler) or projection (XPBD) moves vertices too far, so
             // halve the step and try again.
-            let substeps = 2 * self.settings.substeps.max(1);
             format!(
-                "this step used h = {h:.3e} s; try substeps >= {substeps} (h = {:.3e} s) or a smaller time_step: \
-                 {} has no stable time step that can be estimated in advance (it fails where one step moves vertices \
-                 too far for its linearised springs and gas); the explicit integrators would need h below about \
-                 {h_max:.3e} s",
-                h / 2.0,
+                "this step used h = {h:.3e} s; try {}: {} has no stable time step that can be estimated in advance \
+                 (it fails where one step moves vertices too far for its linearised springs and gas); the explicit \
+                 integrators would need h below about {h_max:.3e} s",
+                self.smaller_steps_advice(h / 2.0),
                 self.integrator_name()
             )
         } else if h_max <= 0.0 {
@@ -680,7 +694,6 @@ impl Body {
                  or SOFTSHELL_INTEGRATOR_IMPLICIT_EULER"
             )
         } else if h_max.is_finite() {
-            let substeps = (self.settings.time_step as f64 / (0.9 * h_max)).ceil().max(1.0);
             let from = if self.settings.integrator == Integrator::ExplicitEuler {
                 "explicit Euler needs h below K_d/K_s, and below 4/(gamma + sqrt(gamma^2 - 4 omega^2)) where damping \
                  dominates; modes the springs do not damp (the gas, sideways tension) grow at any h"
@@ -699,7 +712,8 @@ impl Body {
             } else {
                 format!(
                     "the largest stable time step is about {h_max:.3e} s ({from}; this step used h = {h:.3e} s): use \
-                     substeps >= {substeps} or SOFTSHELL_INTEGRATOR_IMPLICIT_EULER"
+                     {} or SOFTSHELL_INTEGRATOR_IMPLICIT_EULER",
+                    self.smaller_steps_advice(0.9 * h_max)
                 )
             }
         } else {

@@ -294,7 +294,7 @@ struct IntegratorKind;
 fn validate(def: &SoftshellBodyDef) -> Result<()> {
     check_cookie(def.internal_cookie, BODY_DEF_COOKIE, "SoftshellBodyDef", "softshell_body_def_default")?;
     check_range("time_step", def.time_step, 1e-6, 1.0)?;
-    check_count("substeps", def.substeps, 1, 1000)?;
+    check_count("substeps", def.substeps, 1, crate::body::MAX_SUBSTEPS)?;
     check_count("iterations", def.iterations, 1, 1000)?;
     let _: IntegratorKind = arg_kind(def.integrator, "integrator", INTEGRATORS)?;
     check_range("total_mass", def.total_mass, 1e-12, 1e12)?;
