@@ -399,3 +399,11 @@ pub fn unstable_advice(message: &str) -> (u32, f64) {
     let estimate = field("about ").and_then(|t| t.parse().ok()).unwrap_or_else(|| panic!("no estimate: {message}"));
     (substeps, estimate)
 }
+
+/// The gas of a step's pieces, total nRT (J): `pressure × volume`, which holds only while no
+/// piece is clamped (the pressure then counts the clamped volumes that push, the volume the
+/// pieces' own): panics if one is.
+pub fn gas_of(stats: &SoftshellBodyStats) -> f64 {
+    assert!(!stats.volume_clamped, "a piece's volume is clamped: pressure x volume is not its gas");
+    stats.pressure * stats.volume
+}
