@@ -341,8 +341,8 @@ fn issue_balloon_scene(levels: u32, height: f32) -> (Vec<f32>, Vec<u32>, Softshe
 /// equilibrium of the bench (`K_s s (s - 1) Σ L0² = 3 nRT`, V/V0 = 1.05); on the ground the
 /// weight takes `M g y_cm` (776 J of 3 nRT = 7,500 J on the issue's balloon) from what the
 /// springs hold, and the flattened ball settles at V/V0 1.0235. The balloon at rest after the
-/// issue's drop meets the identity to 1e-5 (friction 0 and 0.5 alike; 642 vertices: 1e-5
-/// without friction, 4e-4 with it, where friction holds the contact patch a little).
+/// issue's drop meets the identity to 3e-6 (friction 0.5; 1e-6 without friction in a probe); on
+/// 642 vertices 1e-5 without friction, 4e-4 with it (friction holds the contact patch a little).
 #[test]
 fn the_balloon_at_rest_on_the_ground_meets_the_equilibrium_identity() {
     for (levels, friction, tolerance) in [(3, 0.0f32, 1e-4), (3, 0.5, 2e-3), (5, 0.5, 1e-4)] {
@@ -547,8 +547,9 @@ fn friction_holds_no_more_stretch_than_coulomb_allows() {
 /// stays down. Every integrator alike. (A soft ball is another matter: its bottom vertices meet the
 /// ground one after the other, and a vertex thrown back up into the rest of the falling ball
 /// meets it again, losing speed at each meeting, so restitution per vertex can make it rise
-/// less: the ball of `ball_def` (K_s 2000, gas 50 J) dropped 1 m rose to a centre 1.31 m high
-/// with 0 and 1.17 m with 0.9 under XPBD, 1.02 and 1.07 m under implicit Euler.)
+/// less: a ball of K_s 2000 N/m, K_d 0.5 N s/m, gas 50 J and 1 kg on 482 vertices, dropped 1 m
+/// (a probe through the C ABI), rose to a centre 1.31 m high with 0 and 1.17 m with 0.9 under
+/// XPBD, 1.31 and 1.01 m under symplectic Euler, but 1.02 and 1.07 m under implicit Euler.)
 #[test]
 fn a_sheet_dropped_flat_bounces_to_restitution_squared_of_its_height() {
     let drop = 0.5f64;

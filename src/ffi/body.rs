@@ -37,9 +37,9 @@ pub const SOFTSHELL_INTEGRATOR_IMPLICIT_EULER: u32 = 2;
 /// comes out far softer, though finite. The issue-5 balloon (benches/body_balloon.rs) dropped on
 /// the ground swings about V/V0 1.69 (1.50-1.78 over its last 100 of 600 steps) with 5 substeps
 /// of 2 sweeps and about 1.05 (1.03-1.07) with 10 of 10, where implicit Euler settles at 1.0235.
-/// A 10 g ball of K_s 1e7 with gas 10 J resting on the ground keeps springs stretched by 143%
-/// with the default 1 substep of 10 sweeps; falling freely with 20 substeps at 1/60 s (80 at
-/// 1/15 s) under 5% (tests/ffi_body_stiff.rs). Raise `substeps` (more effective than
+/// A 10 g ball of K_s 1e7 with gas 10 J resting on the ground kept springs stretched by 143%
+/// with the default 1 substep of 10 sweeps (a probe through this API); falling freely with 20
+/// substeps at 1/60 s (80 at 1/15 s) under 5% (tests/ffi_body_stiff.rs). Raise `substeps` (more effective than
 /// `iterations`), or use implicit Euler.
 pub const SOFTSHELL_INTEGRATOR_XPBD: u32 = 3;
 
@@ -100,11 +100,12 @@ pub struct SoftshellBodyDef {
     /// Height of the ground plane, m, in [-1e9, 1e9]. Default 0.
     pub ground_height: f32,
     /// Restitution of contacts with the ground and obstacles, in [0, 1]. Default 0. It acts on
-    /// each vertex at its contact (its normal speed out is this times its speed in): a body that
-    /// lands flat leaves at that fraction of its speed, but a soft ball's bottom vertices land one
-    /// after the other, and one thrown back into the falling rest meets the ground again, losing
-    /// speed each time, so a soft ball may rise less with a high restitution than with 0 (its
-    /// bounce comes from its own springs and gas).
+    /// each vertex at its contact (its normal speed out is at least this times its speed in): a
+    /// body that lands flat leaves at that fraction of its speed, but a soft ball's bottom
+    /// vertices land one after the other, and one thrown back into the falling rest meets the
+    /// ground again, losing speed each time, so a soft ball may rise less with a high restitution
+    /// than with 0 (its bounce comes from its own springs and gas; measured with XPBD and
+    /// symplectic Euler, while implicit Euler's rose a little higher).
     pub restitution: f32,
     /// Coulomb friction coefficient of contacts, in [0, 1000]. Default 0.5.
     pub friction: f32,
@@ -131,7 +132,7 @@ pub struct SoftshellBodyStats {
     pub volume: f64,
     /// Mean gas pressure (total nRT / total volume), Pa; 0 without gas. A piece whose volume is
     /// clamped (`volume_clamped`) counts with its clamped volume: the pressure the gas pushes
-    /// with, which stops growing there.
+    /// with, which stops growing there (so then `pressure * volume` is less than the total nRT).
     pub pressure: f64,
     /// Kinetic energy, J.
     pub kinetic_energy: f64,
