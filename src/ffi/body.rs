@@ -291,11 +291,17 @@ impl TryFrom<u32> for IntegratorKind {
 /// A checked integrator selector (kept out of the header: not `pub` outside the crate).
 struct IntegratorKind;
 
+/// The most substeps a def may ask for (validated without the simulator too; with it, the
+/// simulator's own limit, which its UNSTABLE advice keeps to).
+const MOST_SUBSTEPS: u32 = 1000;
+#[cfg(feature = "body")]
+const _: () = assert!(MOST_SUBSTEPS == crate::body::MAX_SUBSTEPS);
+
 /// Checks every field of a def (messages name the field, its value and the valid range).
 fn validate(def: &SoftshellBodyDef) -> Result<()> {
     check_cookie(def.internal_cookie, BODY_DEF_COOKIE, "SoftshellBodyDef", "softshell_body_def_default")?;
     check_range("time_step", def.time_step, 1e-6, 1.0)?;
-    check_count("substeps", def.substeps, 1, crate::body::MAX_SUBSTEPS)?;
+    check_count("substeps", def.substeps, 1, MOST_SUBSTEPS)?;
     check_count("iterations", def.iterations, 1, 1000)?;
     let _: IntegratorKind = arg_kind(def.integrator, "integrator", INTEGRATORS)?;
     check_range("total_mass", def.total_mass, 1e-12, 1e12)?;
