@@ -69,13 +69,9 @@ pub(crate) fn add_applied_forces(
     let inv_h2 = 1.0 / (h * h);
     for (k, (&[i, j], &rest)) in model.springs.ends.iter().zip(&model.springs.rest).enumerate() {
         let (i, j) = (i as usize, j as usize);
-        let d = x[j] - x[i];
-        let len = d.length();
-        // As the substep: a spring this short moved nothing.
-        if len <= 1e-6 * rest {
-            continue;
-        }
-        let push = d / len * (s.lambda[k] * inv_h2);
+        // As in the substep: a spring too short to have a direction moved nothing.
+        let Some((u, _)) = spring_direction(x, i, j, rest) else { continue };
+        let push = u * (s.lambda[k] * inv_h2);
         f[i] -= push;
         f[j] += push;
     }
@@ -90,6 +86,15 @@ pub(crate) fn add_applied_forces(
         }
     }
     true
+}
+
+/// The unit vector from vertex i to j and their distance, or None when the spring of rest length
+/// `rest` between them is too short to have a direction (then it moves nothing).
+#[inline(always)]
+fn spring_direction(x: &[Vec3], i: usize, j: usize, rest: f32) -> Option<(Vec3, f32)> {
+    let d = x[j] - x[i];
+    let len = d.length();
+    (len > 1e-6 * rest).then(|| (d / len, len))
 }
 
 /// XPBD distance-constraint update (SPEC 2.2): returns `Δλ` for a spring with current vector
@@ -188,12 +193,7 @@ pub(crate) fn substep(
         if ks > 0.0 {
             for (k, (&[i, j], &rest)) in model.springs.ends.iter().zip(&model.springs.rest).enumerate() {
                 let (i, j) = (i as usize, j as usize);
-                let d = x[j] - x[i];
-                let len = d.length();
-                if len <= 1e-6 * rest {
-                    continue;
-                }
-                let u = d / len;
+                let Some((u, len)) = spring_direction(x, i, j, rest) else { continue };
                 let velocity_term = u.dot((x[j] - s.previous[j]) - (x[i] - s.previous[i]));
                 let dl = distance_delta_lambda(
                     len - rest,
