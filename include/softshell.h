@@ -51,8 +51,8 @@
 // of 2 sweeps and about 1.05 (1.03-1.07) with 10 of 10, where implicit Euler settles at 1.0235.
 // A 10 g ball of K_s 1e7 with gas 10 J resting on the ground kept springs stretched by 143%
 // with the default 1 substep of 10 sweeps (a probe through this API); falling freely with 20
-// substeps at 1/60 s (80 at 1/15 s) under 5% (tests/ffi_body_stiff.rs). Raise `substeps` (more effective than
-// `iterations`), or use implicit Euler.
+// substeps at 1/60 s (80 at 1/15 s) under 5% (tests/ffi_body_stiff.rs). Raise `substeps`
+// (more effective than `iterations`), or use implicit Euler.
 #define SOFTSHELL_INTEGRATOR_XPBD 3
 
 // Mean curvature H (1/m), for `..._copy_vertex_curvature`: positive where the surface bends away
