@@ -355,16 +355,10 @@ fn the_balloon_at_rest_on_the_ground_meets_the_equilibrium_identity() {
         }
         let s = snapshot(&body);
         let point = |p: &[f32], i: u32| glam::DVec3::from_array([0, 1, 2].map(|k| p[3 * i as usize + k] as f64));
-        let mut edges = std::collections::BTreeSet::new();
-        for t in triangles.chunks_exact(3) {
-            for k in 0..3 {
-                edges.insert((t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3])));
-            }
-        }
         let ks = def.spring_stiffness as f64;
-        let springs: f64 = edges
-            .iter()
-            .map(|&(a, b)| {
+        let springs: f64 = edges(&triangles)
+            .into_iter()
+            .map(|(a, b)| {
                 let rest = (point(&positions, a) - point(&positions, b)).length();
                 let length = (point(&s.positions, a) - point(&s.positions, b)).length();
                 ks * (length - rest) * length

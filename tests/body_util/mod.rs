@@ -86,19 +86,22 @@ pub fn icosphere(levels: u32, radius: f32) -> (Vec<f32>, Vec<u32>) {
     (positions, f.into_iter().flatten().collect())
 }
 
+/// The edges of a mesh, each once as `(a, b)` with a < b, in the order the triangles first use
+/// them.
+pub fn edges(t: &[u32]) -> Vec<(u32, u32)> {
+    let mut seen = std::collections::HashSet::new();
+    t.chunks_exact(3)
+        .flat_map(|tri| (0..3).map(move |k| (tri[k].min(tri[(k + 1) % 3]), tri[k].max(tri[(k + 1) % 3]))))
+        .filter(|&edge| seen.insert(edge))
+        .collect()
+}
+
 /// `Σ L0²` over the edges of a mesh (each edge once).
 pub fn sum_rest_squared(p: &[f32], t: &[u32]) -> f64 {
-    let mut seen = std::collections::HashSet::new();
-    let mut sum = 0.0;
-    for tri in t.chunks_exact(3) {
-        for k in 0..3 {
-            let (a, b) = (tri[k], tri[(k + 1) % 3]);
-            if seen.insert((a.min(b), a.max(b))) {
-                sum += (0..3).map(|c| ((p[3 * a as usize + c] - p[3 * b as usize + c]) as f64).powi(2)).sum::<f64>();
-            }
-        }
-    }
-    sum
+    edges(t)
+        .into_iter()
+        .map(|(a, b)| (0..3).map(|c| ((p[3 * a as usize + c] - p[3 * b as usize + c]) as f64).powi(2)).sum::<f64>())
+        .sum()
 }
 
 /// A flat cloth of `n` x `n` vertices in the x-y plane (spacing `size / (n - 1)`), hanging down
