@@ -106,56 +106,80 @@ fn over_inflated_ball_cracks_and_deflates() {
     assert!(last.energy_drift.is_finite());
 }
 
-/// An over-inflated ball that swells slowly (K_d 50 N s/m, nRT 750 J: the springs would hold it
-/// past the 12% limit) cracks and then loses its gas through the cracks, step after step,
-/// rather than all at once: the ball of `over_inflated_ball_cracks_and_deflates` shatters into
-/// pieces too small to keep gas (`gas::SHRED_FRACTION`), whose gas is gone at the split, so
-/// it shows no leak. Here, over the steps after the last crack (the topology unchanged), the
-/// gas falls by a steady share each step (the leak, SPEC 2.4: `d(nRT)/dt = -leak_rate A_open
-/// (P - P_ext)`, 20-30% a step here), to under 1% of the start; with `leak_rate` 0 the same
-/// ball keeps what its pieces held after the last crack.
+/// A ball slit by hand tears further and then leaks its gas out through the open crack. The
+/// ball (nRT 600 J, K_d 50 N s/m) settles with its springs at most 10.6% stretched, under the
+/// 12% limit; a slit of two edges through one vertex then loads the springs at its ends, which
+/// crack by their strain (the crack runs from the slit) and stop once the slit has opened, the
+/// ball still one piece but for at most a few faces cut loose. Over the steps after the last
+/// crack (the topology unchanged) the gas falls by a small steady share each step (the leak,
+/// SPEC 2.4: `d(nRT)/dt = -leak_rate A_open (P - P_ext)`), by more than 10% in 80 steps; with
+/// `leak_rate` 0 the gas changes only at the steps that crack. (An over-inflated ball shatters instead: see
+/// `over_inflated_ball_cracks_and_deflates`; its shreds keep no gas, so it shows no leak.)
 #[test]
-fn an_over_inflated_ball_leaks_its_gas_out_through_the_cracks() {
+fn a_slit_ball_tears_and_leaks_its_gas_out_through_the_crack() {
     let (positions, triangles) = icosphere(3, 1.0);
     let run = |leak_rate: f32| {
         let mut def = over_inflated_ball();
         def.spring_damping = 50.0;
-        def.gas_amount = 750.0;
+        def.gas_amount = 600.0;
         def.leak_rate = leak_rate;
         let body = body(&positions, &triangles, &def);
-        // nRT (the gas of every piece: pressure times the volumes that push) after each step,
-        // and the step of the last topology change.
-        let (mut gas, mut last_change, mut generation) = (Vec::new(), None, 0);
-        for k in 0..80 {
+        for _ in 0..40 {
             let stats = step(&body);
-            if stats.topology_generation != generation {
-                (generation, last_change) = (stats.topology_generation, Some(k));
-            }
-            gas.push(gas_of(&stats));
+            assert!(stats.max_strain < 0.11 && stats.springs_broken == 0, "the ball must settle uncracked");
         }
-        (gas, last_change.expect("the over-inflated ball must crack"))
+        let around = ring(&snapshot(&body), 0);
+        for [a, b] in [[around[0], 0], [0, around[around.len() / 2]]] {
+            // SAFETY: live body.
+            assert_eq!(unsafe { softshell_body_break_edge(body.0, a, b) }, SoftshellStatus::Ok, "{}", last_error());
+        }
+        // nRT after each step, whether the step cracked, the springs broken by strain, the
+        // step of the last crack.
+        let (mut gas, mut cracked, mut broken, mut last_crack, mut fragments) = (Vec::new(), Vec::new(), 0, None, 0);
+        for k in 0..160 {
+            let stats = step(&body);
+            if stats.springs_broken > 0 {
+                (broken, last_crack) = (broken + stats.springs_broken, Some(k));
+            }
+            fragments = stats.fragment_count;
+            gas.push(gas_of(&stats));
+            cracked.push(stats.springs_broken > 0);
+        }
+        (gas, cracked, broken, last_crack.expect("the crack must run from the slit"), fragments)
     };
-    let (gas, last_change) = run(0.5);
-    let after = &gas[last_change..];
+    let (gas, _, broken, last_crack, fragments) = run(20.0);
     println!(
-        "leak 0.5: last crack at step {last_change}, nRT then {:.1} J, 20 steps later {:.2} J, at the end {:.3} J",
-        after[0],
-        after[20.min(after.len() - 1)],
-        gas[79]
+        "leak 20: {broken} springs cracked after the slit, the last at step {last_crack}, {fragments} fragments; nRT \
+         then {:.1} J, 80 steps later {:.1} J",
+        gas[last_crack],
+        gas[(last_crack + 80).min(159)]
     );
-    assert!(after[0] > 0.05 * 750.0, "the pieces lost their gas at the split ({:.1} J left): no leak to see", after[0]);
-    for (k, pair) in after.windows(2).take(10).enumerate() {
+    assert!(last_crack <= 70, "still cracking at step {last_crack}: the crack must stop");
+    assert!(fragments <= 4, "the ball broke into {fragments} pieces");
+    for (k, pair) in gas[last_crack..].windows(2).enumerate() {
         let share = pair[1] / pair[0];
-        assert!(share > 0.5 && share < 0.95, "step {}: nRT {:.2} -> {:.2} J", last_change + k + 1, pair[0], pair[1]);
+        assert!(share > 0.99 && share < 0.9999, "step {}: nRT {:.3} -> {:.3} J", last_crack + k + 1, pair[0], pair[1]);
     }
-    assert!(gas[79] < 0.01 * 750.0, "still {:.1} J of gas after 80 steps", gas[79]);
-    let (kept, last_change) = run(0.0);
-    println!(
-        "leak 0: last crack at step {last_change}, nRT then {:.1} J, at the end {:.1} J",
-        kept[last_change], kept[79]
+    assert!(
+        gas[last_crack + 80] < 0.9 * gas[last_crack],
+        "too slow a leak: {:.1} -> {:.1} J",
+        gas[last_crack],
+        gas[last_crack + 80]
     );
-    assert!(last_change <= 74, "still cracking at step {last_change}: nothing to compare");
-    assert!((kept[79] / kept[last_change] - 1.0).abs() < 1e-3, "without a leak the pieces keep their gas");
+    // Without a leak the gas changes only at a crack (the pressure then stays up, and the crack
+    // runs on: pieces cut loose take their share, shreds none).
+    let (kept, cracked, broken, last_crack, _) = run(0.0);
+    println!("leak 0: {broken} springs cracked, the last at step {last_crack}; nRT at the end {:.2} J", kept[159]);
+    for k in 1..160 {
+        if !cracked[k] {
+            assert!(
+                (kept[k] / kept[k - 1] - 1.0).abs() < 1e-6,
+                "step {k}: nRT {} -> {} J without a crack",
+                kept[k - 1],
+                kept[k]
+            );
+        }
+    }
 }
 
 /// A spring cracks exactly when its strain passes `break_strain`: with the limit at the largest
@@ -440,8 +464,8 @@ fn cuts_and_a_storm_on_a_large_body_keep_every_invariant_in_the_callers_numberin
 /// leak counted as energy made: the gas energy is `-nRT ln V`, so the large ball was called
 /// UNSTABLE (a leak looked like energy made) and the small one's drift fell to -60 J (hiding
 /// any energy an instability made). The energy the escaping gas takes is now kept out of the
-/// drift, like external work: every step is OK and the drift stays within the mechanical
-/// energy at stake.
+/// drift, like external work: every step is OK and the drift since the cut (it goes on from
+/// the damping's loss while the ball inflated) stays within the mechanical energy at stake.
 #[test]
 fn a_leak_is_not_taken_for_energy_made_or_lost() {
     for radius in [0.5f32, 1.5] {
@@ -454,10 +478,28 @@ fn a_leak_is_not_taken_for_energy_made_or_lost() {
             def.leak_rate = 1.0;
             def.substeps = 40;
             let b = body(&p, &t, &def);
+            let mut inflated = None;
             for _ in 0..30 {
-                step(&b);
+                inflated = Some(step(&b));
             }
-            let around = ring(&snapshot(&b), 20);
+            // The drift before the cut (damping while the ball inflated), from which it goes on.
+            let at_cut = inflated.unwrap().energy_drift;
+            let inflated = snapshot(&b);
+            // The springs' energy at the cut: what damping can take from the pieces as they
+            // recoil (the piece cut free holds no gas and shrinks at once).
+            let elastic: f64 = edges(&t)
+                .into_iter()
+                .map(|(i, j)| {
+                    let length = |x: &[f32], i: u32, j: u32| {
+                        (0..3)
+                            .map(|k| ((x[3 * i as usize + k] - x[3 * j as usize + k]) as f64).powi(2))
+                            .sum::<f64>()
+                            .sqrt()
+                    };
+                    0.5 * def.spring_stiffness as f64 * (length(&inflated.positions, i, j) - length(&p, i, j)).powi(2)
+                })
+                .sum();
+            let around = ring(&inflated, 20);
             for k in 0..around.len() {
                 let (a, c) = (around[k], around[(k + 1) % around.len()]);
                 // SAFETY: live body.
@@ -471,22 +513,28 @@ fn a_leak_is_not_taken_for_energy_made_or_lost() {
                     .unwrap_or_else(|(s, m)| panic!("radius {radius}, integrator {integrator}, step {k}: {s:?}: {m}"));
                 first_pressure.get_or_insert(stats.pressure);
                 most_kinetic = most_kinetic.max(stats.kinetic_energy);
-                lowest = lowest.min(stats.energy_drift);
-                highest = highest.max(stats.energy_drift);
+                lowest = lowest.min(stats.energy_drift - at_cut);
+                highest = highest.max(stats.energy_drift - at_cut);
                 last = Some(stats);
             }
             let last = last.unwrap();
             println!(
-                "radius {radius}, integrator {integrator}: pressure {:.3} -> {:.3} Pa, drift {lowest:.3e} .. \
-                 {highest:.3e} J, most kinetic energy {most_kinetic:.3e} J",
+                "radius {radius}, integrator {integrator}: pressure {:.3} -> {:.3} Pa, drift since the cut \
+                 {lowest:.3e} .. {highest:.3e} J, most kinetic energy {most_kinetic:.3e} J, springs at the cut {elastic:.3} J",
                 first_pressure.unwrap(),
                 last.pressure
             );
             assert!(last.pressure < 0.8 * first_pressure.unwrap(), "the gas must leak out");
-            assert!(highest < 0.1 * most_kinetic.max(1e-6), "energy made: drift up to {highest} J");
-            // (Damping and the cut itself lose a few times the kinetic energy; the leak, counted
+            // (Explicit Euler makes some energy of its own as the open ball wobbles, up to 1.2
+            // times the most kinetic energy here, as much with leak_rate 0; the gas the leak
+            // takes, counted as made, would be 40-120 J.)
+            assert!(highest < 2.0 * most_kinetic.max(1e-6), "energy made: drift up to {highest} J");
+            // (Damping takes some of the springs' energy as the pieces recoil; the leak, counted
             // as drift, took the small ball's to -60 J.)
-            assert!(lowest > -20.0 * most_kinetic.max(1e-6), "a leak counted as loss: drift down to {lowest} J");
+            assert!(
+                lowest > -0.5 * elastic,
+                "a leak counted as loss: drift down to {lowest} J ({elastic:.2} J in springs)"
+            );
         }
     }
 }
@@ -559,4 +607,101 @@ fn a_failing_step_without_fracture_gives_the_limits_back() {
     }
     assert!(failed, "the step fails");
     assert_eq!((inner.settings().break_strain, inner.settings().break_force), (0.5, 3.0));
+}
+
+/// The longest face side over its rest length (the rest length from the input positions of the
+/// vertices' origins).
+fn worst_side_stretch(s: &Snapshot, input: &[f32]) -> f64 {
+    let rest = |i: u32| {
+        let o = 3 * s.origins[i as usize] as usize;
+        [input[o], input[o + 1], input[o + 2]]
+    };
+    let length = |a: [f32; 3], b: [f32; 3]| (0..3).map(|k| ((a[k] - b[k]) as f64).powi(2)).sum::<f64>().sqrt();
+    let mut worst = 0.0f64;
+    for t in s.triangles.chunks_exact(3) {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            worst = worst.max(length(s.position(a as usize), s.position(b as usize)) / length(rest(a), rest(b)));
+        }
+    }
+    worst
+}
+
+/// Faces stay faces through a fracture storm: every side of a face keeps a spring once its
+/// crack opens (two sides, two springs), and only springs between two faces break. A ball
+/// holding far more gas than its springs bear (nRT 850 J, K_s 400 N/m, breaking at 12.5%)
+/// bursts within a few steps into hundreds of pieces; over 60 steps no face side grows past 3
+/// times its rest length (at most 1.38 with implicit Euler, 1.45 with XPBD, measured). Before,
+/// the sides of an opened crack had no spring: in the step after the storm faces had sides 17
+/// times their rest length, 1,400 times 55 steps later, and the reported volume (of the pieces'
+/// caps) grew to thousands of m³.
+#[test]
+fn faces_keep_their_shape_after_a_fracture_storm() {
+    let (positions, triangles) = icosphere(3, 1.0);
+    for integrator in [SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, SOFTSHELL_INTEGRATOR_XPBD] {
+        let mut def = softshell_body_def_default();
+        def.integrator = integrator;
+        if integrator == SOFTSHELL_INTEGRATOR_XPBD {
+            def.substeps = 20;
+        }
+        def.time_step = 1.0 / 30.0;
+        def.total_mass = 1.0;
+        def.spring_stiffness = 400.0;
+        def.spring_damping = 20.0;
+        def.gas_amount = 850.0;
+        def.break_strain = 0.125;
+        def.leak_rate = 0.5;
+        def.gravity = [0.0; 3];
+        let body = body(&positions, &triangles, &def);
+        let (mut worst, mut broken, mut fragments) = (0.0f64, 0, 0);
+        for _ in 0..60 {
+            let stats = step(&body);
+            broken += stats.springs_broken;
+            fragments = stats.fragment_count;
+            let s = snapshot(&body);
+            worst = worst.max(worst_side_stretch(&s, &positions));
+            assert!(stats.volume < 10.0, "the pieces' volume grew to {} m³", stats.volume);
+        }
+        println!(
+            "integrator {integrator}: {broken} springs broken, {fragments} fragments, sides at most {worst:.2} x rest"
+        );
+        assert!(broken > 500 && fragments > 100, "no storm: {broken} springs broken, {fragments} fragments");
+        assert!(worst < 3.0, "a face side stretched to {worst:.1} times its rest length");
+    }
+}
+
+/// A cut parts two faces: an edge of one face (a cloth's border, a side of an open crack) is
+/// refused with INVALID_ARGUMENT and a message, and nothing changes (generation, counts).
+#[test]
+fn a_cut_along_a_border_is_refused_and_changes_nothing() {
+    let (positions, triangles) = cloth(4, 1.0);
+    let mut def = softshell_body_def_default();
+    def.gas_amount = 0.0;
+    let b = body(&positions, &triangles, &def);
+    let before = snapshot(&b);
+    let border = edges(&triangles)
+        .into_iter()
+        .find(|&(x, y)| triangles.chunks_exact(3).filter(|t| t.contains(&x) && t.contains(&y)).count() == 1);
+    let (x, y) = border.expect("a cloth has border edges");
+    // SAFETY: live body.
+    assert_eq!(unsafe { softshell_body_break_edge(b.0, x, y) }, SoftshellStatus::InvalidArgument);
+    assert!(last_error().contains("one face"), "{}", last_error());
+    let after = snapshot(&b);
+    assert_eq!((after.generation, after.vertex_count()), (before.generation, before.vertex_count()));
+    // A cut inside the cloth from its border (so that it opens), then the same edge again, now
+    // two sides of one face each.
+    let inner = edges(&triangles)
+        .into_iter()
+        .find(|&(x, y)| triangles.chunks_exact(3).filter(|t| t.contains(&x) && t.contains(&y)).count() == 2)
+        .unwrap();
+    // SAFETY: live body.
+    assert_eq!(unsafe { softshell_body_break_edge(b.0, inner.0, inner.1) }, SoftshellStatus::Ok);
+    let cut = snapshot(&b);
+    assert!(cut.vertex_count() > before.vertex_count(), "the cut did not open");
+    // SAFETY: live body.
+    let again = unsafe { softshell_body_break_edge(b.0, inner.0, inner.1) };
+    assert_eq!(again, SoftshellStatus::InvalidArgument);
+    let after = snapshot(&b);
+    assert_eq!((after.generation, after.vertex_count()), (cut.generation, cut.vertex_count()));
+    step(&b);
 }

@@ -1158,17 +1158,20 @@ impl Body {
         if pairs.is_empty() && cores.is_empty() {
             return (0, 0);
         }
-        let broken = pairs.len() as u64;
         trace_phase("detect", t);
-        let released = self.change_topology(&pairs, &cores.iter().map(|c| c.1).collect::<Vec<_>>());
-        (broken, released)
+        self.change_topology(&pairs, &cores.iter().map(|c| c.1).collect::<Vec<_>>())
     }
 
     /// Breaks the springs `pairs` (vertex pairs of current springs) and releases the core blocks
-    /// of `cores`, then rebuilds springs, fragments and gas. The one place where topology changes.
-    /// The kept topology is brought up to date after each kind of change (only around the faces
-    /// that changed), never built again from scratch.
-    fn change_topology(&mut self, pairs: &[[u32; 2]], cores: &[u32]) -> u64 {
+    /// of `cores`, then rebuilds springs, fragments and gas; returns (springs broken, cores
+    /// released). The one place where topology changes. The kept topology is brought up to date
+    /// after each kind of change (only around the faces that changed), never built again from
+    /// scratch.
+    ///
+    /// Only a spring between two faces breaks: a crack parts faces, and the spring on an edge of
+    /// one face (a side of an opened crack, a cloth's border) has none to part from; it stays,
+    /// holding its face's side (see `surface::edge_is_broken`).
+    fn change_topology(&mut self, pairs: &[[u32; 2]], cores: &[u32]) -> (u64, u64) {
         let n = self.nodes.len();
         let t = Instant::now();
         let fracture = self.fracture.get_or_insert_with(|| Fracture::new(n, self.triangles.len()));
@@ -1178,18 +1181,19 @@ impl Body {
         let mut topology = self.topology.take().unwrap_or_else(|| Topology::build(&self.triangles, n));
         trace_phase("start", t);
         let t = Instant::now();
-        if !pairs.is_empty() {
-            let edges: Vec<u32> = pairs
-                .iter()
-                .filter_map(|&[a, b]| {
-                    let key = [a.min(b), a.max(b)];
-                    topology.edges.binary_search(&key).ok().map(|e| e as u32)
-                })
-                .collect();
+        let edges: Vec<u32> = pairs
+            .iter()
+            .filter_map(|&[a, b]| {
+                let key = [a.min(b), a.max(b)];
+                topology.edges.binary_search(&key).ok().map(|e| e as u32)
+            })
+            .filter(|&e| topology.edge_face_count[e as usize] >= 2)
+            .collect();
+        if !edges.is_empty() {
             crack::mark_broken(fracture, &topology, &edges);
             trace_phase("cracks: mark", t);
             let t = Instant::now();
-            let mut vertices: Vec<u32> = pairs.iter().flatten().copied().collect();
+            let mut vertices: Vec<u32> = edges.iter().flat_map(|&e| topology.edges[e as usize]).collect();
             vertices.sort_unstable();
             vertices.dedup();
             let mut before = std::mem::take(&mut fracture.before);
@@ -1226,15 +1230,17 @@ impl Body {
             topology == Topology::build(&self.triangles, self.nodes.len()),
             "the updated topology differs from a new build"
         );
-        if pairs.is_empty() && released == 0 {
-            // Only core candidates, none of them released (a fan a crack had opened): nothing
-            // changed, so no rebuild and no new generation (a review saw the generation go up
-            // every step, each a full rebuild, for a vertex that could never be released).
+        let broken = edges.len() as u64;
+        if broken == 0 && released == 0 {
+            // Only springs of one face over the limit, and core candidates none of which was
+            // released (a fan a crack had opened): nothing changed, so no rebuild and no new
+            // generation (a review saw the generation go up every step, each a full rebuild, for
+            // a vertex that could never be released).
             self.topology = Some(topology);
             if let Some(fracture) = self.fracture.as_mut() {
                 fracture.face_fragment_before = old_face_fragment;
             }
-            return 0;
+            return (0, 0);
         }
         if let Scratch::Implicit(s) = &mut self.scratch {
             s.forget_prepared();
@@ -1248,7 +1254,7 @@ impl Body {
             s.extend_warm_start(&fracture.origin);
         }
         trace_phase("warm start", t);
-        released
+        (broken, released)
     }
 
     /// Rebuilds springs, fragments and gas after a topology change (`topology` is that of the
@@ -1285,13 +1291,21 @@ impl Body {
     }
 
     /// Breaks the spring between vertices `a` and `b` by hand (an interactive cut), with the
-    /// same crack as a spring over its strain limit. Error if they are not joined by a spring.
+    /// same crack as a spring over its strain limit. Error, and nothing changed, if they are not
+    /// joined by a spring or their edge has one face (nothing to part: see `change_topology`).
     pub fn break_edge(&mut self, a: u32, b: u32) -> Result<()> {
         let (i, j) = (self.check_vertex(a, "a")? as u32, self.check_vertex(b, "b")? as u32);
         let key = [i.min(j), i.max(j)];
         if a == b || !self.springs.ends.contains(&key) {
             return Err(Error::invalid_argument(format!(
                 "vertices {a} and {b} are not joined by a spring (not an edge of the current mesh, or already broken)"
+            )));
+        }
+        let faces = self.triangles.iter().filter(|t| t.contains(&i) && t.contains(&j)).count();
+        if faces < 2 {
+            return Err(Error::invalid_argument(format!(
+                "the edge of vertices {a} and {b} has one face: a cut parts two faces, and this edge is on the \
+                 border (of the mesh, or of a crack already open)"
             )));
         }
         let before = match self.energy_now.take() {
@@ -1561,12 +1575,17 @@ mod tests {
                         .unwrap();
                 }
                 if holes {
-                    // Every spring of three vertices cut: holes whose caps hold the gas (the
-                    // gas's `Σ g·v` then waits for the caps' share of the gradient).
+                    // Every edge between two faces at three vertices cut: holes whose caps hold
+                    // the gas (the gas's `Σ g·v` then waits for the caps' share of the gradient).
                     for vertex in [5usize, 60, 150] {
                         // (The springs' ends are internal indices; `break_edge` takes external ones.)
                         let inside = body.order.internal(vertex) as u32;
-                        while let Some(&[a, b]) = body.springs.ends.iter().find(|e| e.contains(&inside)) {
+                        let two_faces = |body: &Body, [a, b]: [u32; 2]| {
+                            body.triangles.iter().filter(|t| t.contains(&a) && t.contains(&b)).count() == 2
+                        };
+                        while let Some(&[a, b]) =
+                            body.springs.ends.iter().find(|&&e| e.contains(&inside) && two_faces(body, e))
+                        {
                             let (a, b) = (body.order.external(a as usize), body.order.external(b as usize));
                             body.break_edge(a as u32, b as u32).unwrap();
                         }

@@ -146,15 +146,20 @@ pub(crate) fn side_of(topology: &Topology, face: u32, edge: u32) -> Option<usize
     topology.face_edges[face as usize].iter().position(|&e| e == edge)
 }
 
-/// True when edge `edge` carries no spring: one of its first two faces marks it broken (on the
-/// first side of that face that is the edge).
+/// True when edge `edge` carries no spring: it still joins two (or more) faces, one of its first
+/// two faces marks it broken (on the first side of that face that is the edge). A broken edge
+/// whose faces the crack has parted is two edges of one face each, the sides of the crack, and
+/// each is a spring like every other edge of the surface: a face keeps its three sides, so no
+/// face is left held at a corner by nothing (before, the sides of an opened crack had no spring,
+/// and after a fracture storm faces with two free sides stretched without bound).
 #[cfg(test)]
 pub(crate) fn edge_is_broken(topology: &Topology, fracture: Option<&Fracture>, edge: u32) -> bool {
     let Some(fracture) = fracture else { return false };
-    topology.edge_faces[edge as usize]
-        .iter()
-        .filter(|&&f| f != crate::mesh::NO_FACE)
-        .any(|&f| side_of(topology, f, edge).is_some_and(|side| fracture.is_broken(f, side)))
+    topology.edge_face_count[edge as usize] >= 2
+        && topology.edge_faces[edge as usize]
+            .iter()
+            .filter(|&&f| f != crate::mesh::NO_FACE)
+            .any(|&f| side_of(topology, f, edge).is_some_and(|side| fracture.is_broken(f, side)))
 }
 
 /// The edges that carry no spring, sorted: those [`edge_is_broken`] finds, gathered from the
@@ -168,6 +173,7 @@ fn broken_edges(topology: &Topology, fracture: Option<&Fracture>) -> Vec<u32> {
             // Only as edge_is_broken counts it: from one of the edge's first two faces, on the
             // face's first side along the edge.
             if e != u32::MAX
+                && topology.edge_face_count[e as usize] >= 2
                 && topology.edge_faces[e as usize].contains(&(f as u32))
                 && side_of(topology, f as u32, e) == Some(side)
             {
@@ -180,7 +186,8 @@ fn broken_edges(topology: &Topology, fracture: Option<&Fracture>) -> Vec<u32> {
     broken
 }
 
-/// One spring per unbroken edge, with rest length `|X_a - X_b|` from the rest positions.
+/// One spring per edge but the broken ones that still join two faces ([`edge_is_broken`]), with
+/// rest length `|X_a - X_b|` from the rest positions.
 pub(crate) fn build_springs(topology: &Topology, fracture: Option<&Fracture>, rest: &[Vec3]) -> Springs {
     rebuild_springs(topology, fracture, rest, Springs::default())
 }
@@ -220,10 +227,12 @@ mod tests {
     #[test]
     fn springs_skip_exactly_the_broken_edges() {
         // A torus grid with a few duplicated faces (non-manifold edges, where only the first two
-        // faces count) and a degenerate one (an edge twice in one face).
+        // faces count), a degenerate one (an edge twice in one face), and a hole (edges of one
+        // face, which keep their springs, broken or not).
         let (nu, nv) = (6u32, 5u32);
         let mut triangles = crate::mesh::torus_grid(nu, nv);
         triangles.extend([triangles[3], triangles[7], triangles[7], [0, 1, 0]]);
+        triangles.drain(20..24);
         let rest: Vec<Vec3> = (0..nu * nv).map(|k| Vec3::new(k as f32, (k * k % 7) as f32, 0.5 * k as f32)).collect();
         let topology = Topology::build(&triangles, rest.len());
         let mut state = 99u32;
@@ -249,6 +258,11 @@ mod tests {
                 .map(|e| topology.edges[e as usize])
                 .collect();
             assert_eq!(springs.ends, expected, "round {round}");
+            let border = (0..topology.edges.len()).filter(|&e| topology.edge_face_count[e] == 1);
+            assert!(border.clone().count() >= 6);
+            for e in border {
+                assert!(springs.ends.contains(&topology.edges[e]), "round {round}: border edge {e} lost its spring");
+            }
             assert!(springs.ends.len() < topology.edges.len(), "round {round}: some springs must break");
             for (&[a, b], &l) in springs.ends.iter().zip(&springs.rest) {
                 assert_eq!(l, (rest[b as usize] - rest[a as usize]).length());
