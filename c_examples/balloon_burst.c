@@ -1,11 +1,11 @@
 /* balloon_burst: inflate a sphere until it cracks, print every topology change and write OBJ
  * frames.
  *   balloon_burst [frames_dir] [mesh.obj]     (defaults: balloon_frames, data/sphere.obj)
- * The balloon (time step 1/30 s) starts at rest and swells until its springs stretch by almost the breaking strain;
- * at step 12 a pin prick (one triangle cut out by hand with softshell_body_break_edge) makes a
- * hole, the crack runs from there as each broken spring loads its neighbours, and the gas leaks
- * out. Every 10th step
- * and every step that changes the topology is written as frames_dir/frame_NNNN.obj.
+ * The balloon (time step 1/30 s) starts at rest and swells until its springs stretch by almost
+ * the breaking strain; at step 12 a pin prick (a slit of two edges through one vertex, cut by
+ * hand with softshell_body_break_edge) opens the surface, the crack runs from the slit's ends as
+ * each broken spring loads its neighbours, and the skin tears into pieces. Every 10th step and
+ * every step that changes the topology is written as frames_dir/frame_NNNN.obj.
  * Exit status 0 on success, 1 on any error (the library's message is printed). */
 #define _POSIX_C_SOURCE 200809L
 #include <errno.h>
@@ -75,6 +75,29 @@ static int write_obj(const char *dir, unsigned frame, const Buffers *b, size_t n
   return 0;
 }
 
+/* The two ends of a straight slit through vertex v: a neighbour of v and the one half way round
+ * v's ring of neighbours (the ring walked from face to face around v). */
+static void slit_ends(const uint32_t *triangles, size_t n_indices, uint32_t v, uint32_t ends[2]) {
+  uint32_t ring[64];
+  size_t count = 0;
+  for (size_t t = 0; t + 2 < n_indices; t += 3)
+    if (triangles[t] == v) {
+      ring[count++] = triangles[t + 1];
+      break;
+    }
+  /* Each face (v, a, b) in winding order leads from a to b: follow it until the ring closes. */
+  while (count < 64) {
+    uint32_t next = ring[0];
+    for (size_t t = 0; t + 2 < n_indices; t += 3)
+      for (int c = 0; c < 3; ++c)
+        if (triangles[t + c] == v && triangles[t + (c + 1) % 3] == ring[count - 1]) next = triangles[t + (c + 2) % 3];
+    if (next == ring[0]) break;
+    ring[count++] = next;
+  }
+  ends[0] = ring[0];
+  ends[1] = ring[count / 2];
+}
+
 int main(int argc, char **argv) {
   const char *dir = argc > 1 ? argv[1] : "balloon_frames";
   const char *path = argc > 2 ? argv[2] : "data/sphere.obj";
@@ -121,14 +144,15 @@ int main(int argc, char **argv) {
         result = fail("copying positions and triangles", status);
         break;
       }
-      uint32_t t[3] = {buffers.triangles[0], buffers.triangles[1], buffers.triangles[2]};
-      for (int k = 0; k < 3 && result == 0; ++k) {
-        status = softshell_body_break_edge(body, t[k], t[(k + 1) % 3]);
+      uint32_t ends[2];
+      const uint32_t v = buffers.triangles[0];
+      slit_ends(buffers.triangles, n_indices, v, ends);
+      for (int k = 0; k < 2 && result == 0; ++k) {
+        status = softshell_body_break_edge(body, ends[k], v);
         if (status != SOFTSHELL_STATUS_OK) result = fail("softshell_body_break_edge", status);
       }
       if (result != 0) break;
-      printf("%5u: pin prick, triangle (%u, %u, %u) cut out by hand\n", step, (unsigned)t[0], (unsigned)t[1],
-             (unsigned)t[2]);
+      printf("%5u: pin prick, a slit %u-%u-%u cut by hand\n", step, (unsigned)ends[0], (unsigned)v, (unsigned)ends[1]);
       generation = softshell_body_topology_generation(body);
     }
     SoftshellBodyStats stats;

@@ -716,6 +716,25 @@ class Body(_Handle):
     def break_edge(self, a, b):
         _check(C.body_break_edge(self.handle, a, b))
 
+    def cut_slit(self, vertex):
+        """A pin prick: breaks the two edges from `vertex` to opposite sides of its ring of
+        neighbours, a straight slit through it (a crack runs from a slit that opens; a cut that
+        only frees one face's corner opens nothing). Returns the slit's two ends."""
+        triangles = self.triangles()
+        faces = triangles[(triangles == vertex).any(axis=1)]
+        # Each face (vertex, a, b) in winding order leads from a to b around the ring.
+        after = {}
+        for face in faces:
+            c = int(np.flatnonzero(face == vertex)[0])
+            after[int(face[(c + 1) % 3])] = int(face[(c + 2) % 3])
+        ring = [next(iter(after))]
+        while after[ring[-1]] != ring[0]:
+            ring.append(after[ring[-1]])
+        ends = (ring[0], ring[len(ring) // 2])
+        for end in ends:
+            self.break_edge(end, vertex)
+        return ends
+
     def step(self):
         s = BodyStats()
         _check(C.body_step(self.handle, ctypes.byref(s)))

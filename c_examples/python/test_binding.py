@@ -217,6 +217,21 @@ class Buffers(unittest.TestCase):
         self.assertEqual(topology["fragment_ids"].shape, (body.triangle_count,))
         self.assertFalse(body.refresh()[0])
 
+    def test_a_slit_opens_and_its_sides_cannot_be_cut_again(self):
+        sphere = softshell.Mesh.load_obj(os.path.join(ROOT, "data", "sphere.obj"))
+        body = softshell.Body(sphere, gas_amount=10.0)
+        v = int(body.triangles()[0][0])
+        a, b = body.cut_slit(v)
+        self.assertNotEqual(a, b)
+        self.assertIn(v, np.unique(body.triangles()))
+        self.assertEqual(body.vertex_count, sphere.vertex_count + 1, "the slit splits its middle vertex in two")
+        # Each side of the slit is now an edge of one face: nothing left to part.
+        with self.assertRaises(softshell.Error) as caught:
+            body.break_edge(a, v)
+        self.assertIn("INVALID_ARGUMENT", str(caught.exception))
+        self.assertIn("one face", str(caught.exception))
+        body.step()
+
     def test_frames_are_written(self):
         sphere = softshell.Mesh.load_obj(os.path.join(ROOT, "data", "sphere.obj"))
         shell = softshell.Shell(sphere)

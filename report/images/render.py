@@ -110,14 +110,12 @@ def contraction():
 
 def burst():
     sphere = softshell.Mesh.load_obj(os.path.join(ROOT, "data", "sphere.obj"))
-    body = softshell.Body(sphere, gas_amount=4500.0, break_strain=0.35, gravity=[0, 0, 0], spring_damping=2.0,
+    body = softshell.Body(sphere, gas_amount=4500.0, break_strain=0.28, gravity=[0, 0, 0], spring_damping=2.0,
                           time_step=1 / 120)
     frames = []
     for i in range(68):
         if i == 60:
-            a, b, c = (int(v) for v in body.triangles()[0])
-            body.break_edge(a, b)
-            body.break_edge(b, c)
+            body.cut_slit(int(body.triangles()[0][1]))
         if i in (59, 63, 67):
             path = os.path.join(TMP, f"burst_{i}.ply")
             body.save_ply(path, softshell.BODY_PLY_FRAGMENT)

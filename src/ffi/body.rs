@@ -85,7 +85,11 @@ pub struct SoftshellBodyDef {
     /// implicit response, which never carries it past the wind's speed however light it is.
     pub drag: f32,
     /// Spring strain `(length - rest)/rest` above which a spring breaks and the surface cracks,
-    /// in [0, 1e6]. 0 (default) = never.
+    /// in [0, 1e6]. 0 (default) = never. Only a spring between two faces breaks: once a crack
+    /// opens, each of its two sides is an edge of one face and keeps a spring (of the same
+    /// stiffness, at the rest length of the edge), as a cloth's border does; those never break, so
+    /// every face keeps its three sides. A crack runs from where the surface opens: a pin prick
+    /// that cuts a corner off one face opens nothing, a slit of two edges through a vertex does.
     pub break_strain: f32,
     /// Net force on a vertex, N, above which it is cut out as a core block, in [0, 1e12]: each
     /// vertex at most once, and the vertices of a released block (and the centre of the patch it
@@ -158,7 +162,8 @@ pub struct SoftshellBodyStats {
     /// True when a gas volume was clamped during the step (a piece near zero or inverted volume:
     /// its pressure stopped growing).
     pub volume_clamped: bool,
-    /// Largest spring strain at the end of the step.
+    /// Largest spring strain at the end of the step (of every spring, also those on a border,
+    /// which never break: see `SoftshellBodyDef::break_strain`).
     pub max_strain: f64,
     /// Conjugate-gradient iterations of the step (implicit Euler), 0 otherwise.
     pub solver_iterations: u64,
@@ -529,9 +534,11 @@ pub unsafe extern "C" fn softshell_body_apply_impulse(
 
 /// Breaks the spring between vertices `a` and `b` by hand (an interactive cut): the same crack
 /// as a spring over `break_strain`. The surface opens where a chain of broken edges passes through
-/// a vertex (that vertex is split; copies are appended). Bumps the topology generation.
-/// Works whatever the break limits are. Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` when an index
-/// is out of range or `a` and `b` are not joined by a spring (not an edge, or already broken).
+/// a vertex (that vertex is split; copies are appended), and each side of the opened edge is then
+/// a spring of its own face. Bumps the topology generation. Works whatever the break limits are.
+/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT`, with nothing changed, when an index is out of
+/// range, `a` and `b` are not joined by a spring (not an edge, or broken and not yet open), or
+/// their edge has one face (a border of the mesh, or a side of an open crack: nothing to part).
 ///
 /// # Safety
 /// `body` must be NULL or a live body.
