@@ -2,7 +2,9 @@
 //! its edge broken on both faces; then at each end vertex the fan of faces is split at the broken
 //! edges, and every fan after the first gets a copy of the vertex (same x and v, mass split by
 //! fan rest area, appended so that no survivor is renumbered). Faces keep their index and winding;
-//! only the corner that named the vertex is re-instanced.
+//! only the corner that named the vertex is re-instanced. A broken edge carries no spring while
+//! its two faces still share it; once the split parts them, each is an edge of one face and a
+//! spring again (`surface::edge_is_broken`), so every face keeps its three sides.
 //!
 //! Mass and momentum are conserved exactly (the copies share the velocity); positions do not move.
 
