@@ -107,13 +107,14 @@ fn over_inflated_ball_cracks_and_deflates() {
 }
 
 /// A ball slit by hand tears further and then leaks its gas out through the open crack. The
-/// ball (nRT 600 J, K_d 50 N s/m) settles with its springs at most 10.6% stretched, under the
-/// 12% limit; a slit of two edges through one vertex then loads the springs at its ends, which
-/// crack by their strain (the crack runs from the slit) and stop once the slit has opened, the
-/// ball still one piece but for at most a few faces cut loose. Over the steps after the last
-/// crack (the topology unchanged) the gas falls by a small steady share each step (the leak,
-/// SPEC 2.4: `d(nRT)/dt = -leak_rate A_open (P - P_ext)`), by more than 10% in 80 steps; with
-/// `leak_rate` 0 the gas changes only at the steps that crack. (An over-inflated ball shatters instead: see
+/// ball (nRT 615 J, K_d 50 N s/m) settles with its springs at most 11% stretched, under the 12%
+/// limit; a slit of two edges through one vertex then loads the springs at its ends, which
+/// crack by their strain (the crack runs from the slit) until the leak has lowered the
+/// pressure, the ball still one piece but for a few faces cut loose. Over the steps after the
+/// last crack (the topology unchanged) the gas falls by a small steady share each step (the
+/// leak, SPEC 2.4: `d(nRT)/dt = -leak_rate A_open (P - P_ext)`), by more than 10% in 80 steps;
+/// with `leak_rate` 0 the pressure stays, the crack runs on and the ball bursts, and the gas
+/// changes only at the steps that crack. (An over-inflated ball shatters at once: see
 /// `over_inflated_ball_cracks_and_deflates`; its shreds keep no gas, so it shows no leak.)
 #[test]
 fn a_slit_ball_tears_and_leaks_its_gas_out_through_the_crack() {
@@ -121,7 +122,7 @@ fn a_slit_ball_tears_and_leaks_its_gas_out_through_the_crack() {
     let run = |leak_rate: f32| {
         let mut def = over_inflated_ball();
         def.spring_damping = 50.0;
-        def.gas_amount = 600.0;
+        def.gas_amount = 615.0;
         def.leak_rate = leak_rate;
         let body = body(&positions, &triangles, &def);
         for _ in 0..40 {
@@ -155,10 +156,10 @@ fn a_slit_ball_tears_and_leaks_its_gas_out_through_the_crack() {
         gas[(last_crack + 80).min(159)]
     );
     assert!(last_crack <= 70, "still cracking at step {last_crack}: the crack must stop");
-    assert!(fragments <= 4, "the ball broke into {fragments} pieces");
+    assert!(fragments <= 8, "the ball broke into {fragments} pieces");
     for (k, pair) in gas[last_crack..].windows(2).enumerate() {
         let share = pair[1] / pair[0];
-        assert!(share > 0.99 && share < 0.9999, "step {}: nRT {:.3} -> {:.3} J", last_crack + k + 1, pair[0], pair[1]);
+        assert!(share > 0.95 && share < 0.9999, "step {}: nRT {:.3} -> {:.3} J", last_crack + k + 1, pair[0], pair[1]);
     }
     assert!(
         gas[last_crack + 80] < 0.9 * gas[last_crack],
@@ -172,6 +173,7 @@ fn a_slit_ball_tears_and_leaks_its_gas_out_through_the_crack() {
     println!("leak 0: {broken} springs cracked, the last at step {last_crack}; nRT at the end {:.2} J", kept[159]);
     for k in 1..160 {
         if !cracked[k] {
+            assert!(kept[k - 1] > 0.0, "step {k}: no gas left without a leak");
             assert!(
                 (kept[k] / kept[k - 1] - 1.0).abs() < 1e-6,
                 "step {k}: nRT {} -> {} J without a crack",
@@ -631,7 +633,7 @@ fn worst_side_stretch(s: &Snapshot, input: &[f32]) -> f64 {
 /// crack opens (two sides, two springs), and only springs between two faces break. A ball
 /// holding far more gas than its springs bear (nRT 850 J, K_s 400 N/m, breaking at 12.5%)
 /// bursts within a few steps into hundreds of pieces; over 60 steps no face side grows past 3
-/// times its rest length (at most 1.38 with implicit Euler, 1.45 with XPBD, measured). Before,
+/// times its rest length (at most 1.31 with implicit Euler, 1.47 with XPBD, measured). Before,
 /// the sides of an opened crack had no spring: in the step after the storm faces had sides 17
 /// times their rest length, 1,400 times 55 steps later, and the reported volume (of the pieces'
 /// caps) grew to thousands of m³.
@@ -701,6 +703,7 @@ fn a_cut_along_a_border_is_refused_and_changes_nothing() {
     // SAFETY: live body.
     let again = unsafe { softshell_body_break_edge(b.0, inner.0, inner.1) };
     assert_eq!(again, SoftshellStatus::InvalidArgument);
+    assert!(last_error().contains("one face"), "{}", last_error());
     let after = snapshot(&b);
     assert_eq!((after.generation, after.vertex_count()), (cut.generation, cut.vertex_count()));
     step(&b);

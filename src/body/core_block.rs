@@ -147,6 +147,10 @@ pub(crate) fn release(
         let fan = triangles[ring_faces[i] as usize];
         let side = (0..3).find(|&s| fan[s] == copies[i] && fan[(s + 1) % 3] == copies[j]).unwrap_or(0);
         let bit = fracture.broken[ring_faces[i] as usize] & (1 << side) != 0;
+        // The fan face now shares that side with the block's cap, not with the face across the
+        // crack: its bit moves to the surface cap (which meets that face), or the side would
+        // count as a broken edge of two faces and lose its spring.
+        fracture.broken[ring_faces[i] as usize] &= !(1 << side);
         triangles.push([c_surface, ring[i], ring[j]]);
         fracture.broken.push(if bit { 1 << 1 } else { 0 });
         triangles.push([c_block, copies[j], copies[i]]);

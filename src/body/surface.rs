@@ -53,7 +53,9 @@ impl Nodes {
 /// Fracture bookkeeping (allocated only when the body can break).
 #[derive(Debug, Default)]
 pub(crate) struct Fracture {
-    /// Per face, bit k set when side k (corner k to corner k+1) is a broken spring.
+    /// Per face, bit k set when side k (corner k to corner k+1) is a broken edge: no spring while
+    /// the edge still joins two faces, a spring at [`Fracture::opened_rest`] once the crack has
+    /// parted them ([`edge_is_broken`]).
     pub broken: Vec<u8>,
     /// Per vertex, the input-mesh vertex it was split from.
     pub origin: Vec<u32>,
@@ -68,6 +70,10 @@ pub(crate) struct Fracture {
     /// the centre of the patch it left: they release no block themselves (see
     /// `core_block::release`).
     pub in_core: Vec<bool>,
+    /// The rest length of each side of an opened crack (an edge of one face with a broken bit),
+    /// by its end vertices (sorted), set when the crack opened there ([`opened_side_rest`]);
+    /// sorted by those vertices (a vector, not a map, so that its memory is known to the byte).
+    pub opened_rest: Vec<([u32; 2], f32)>,
 }
 
 impl Fracture {
@@ -79,7 +85,34 @@ impl Fracture {
             before: Vec::new(),
             face_fragment_before: Vec::new(),
             in_core: Vec::new(),
+            opened_rest: Vec::new(),
         }
+    }
+
+    /// Records the rest length of every side of an opened crack in `topology` (that of the
+    /// current triangles) that has none yet ([`opened_side_rest`] of its length at positions `x`
+    /// and its rest length from `rest`); sides no longer in the mesh (split again since) are
+    /// forgotten.
+    pub fn record_opened_sides(&mut self, topology: &Topology, x: &[Vec3], rest: &[Vec3]) {
+        let mut sides = Vec::with_capacity(self.opened_rest.len());
+        for (f, &bits) in self.broken.iter().enumerate().filter(|(_, b)| **b != 0) {
+            for side in (0..3).filter(|&side| bits & (1 << side) != 0) {
+                let e = topology.face_edges[f][side];
+                if e == u32::MAX || topology.edge_face_count[e as usize] != 1 {
+                    continue;
+                }
+                let key = topology.edges[e as usize];
+                let [a, b] = key.map(|v| v as usize);
+                let length = match self.opened_rest.binary_search_by_key(&key, |&(k, _)| k) {
+                    Ok(i) => self.opened_rest[i].1,
+                    Err(_) => opened_side_rest((x[b] - x[a]).length(), (rest[b] - rest[a]).length()),
+                };
+                sides.push((key, length));
+            }
+        }
+        // (A side is seen from its one face only once; the sort makes the lookups above work.)
+        sides.sort_unstable_by_key(|&(k, _)| k);
+        self.opened_rest = sides;
     }
 
     /// True when vertex `i` belongs to a released core block or is the centre of a patch one
@@ -119,6 +152,7 @@ impl Fracture {
             + self.spare.memory_bytes()
             + self.before.capacity() * 12
             + self.in_core.capacity()
+            + self.opened_rest.capacity() * std::mem::size_of::<([u32; 2], f32)>()
     }
 
     /// Appends a vertex at `x` with velocity `v` and `mass`, split from `from` (pinned if `from`
@@ -139,6 +173,26 @@ impl Fracture {
     pub fn is_broken(&self, face: u32, side: usize) -> bool {
         self.broken[face as usize] & (1 << side) != 0
     }
+}
+
+/// The rest length of a side of a crack that opened at length `length`, of an edge of rest
+/// length `rest`: `length - (length - rest)/√2` when stretched, else `rest`.
+///
+/// Why: each side of an opened crack keeps a spring, so that no face corner is held by nothing
+/// (without, faces stretched to 1,400 times their rest length after a storm). At `rest`, the
+/// two sides would each hold the energy `K_s (l - L0)²/2` the spring had when it broke: the
+/// crack would make energy (a review measured a storm step take the springs' energy from 110.7
+/// to 123.5 J), and the sides, born over the break limit, would keep the strain scan running
+/// every step. At this length the two sides together hold exactly the energy of the spring that
+/// broke (`2 · K_s ((l - L0)/√2)²/2`), so the split neither makes nor takes energy, and each is
+/// stretched by `1/√2` of the broken spring's extension (under the limit that broke it). The
+/// price: their pull together is √2 times the spring's. At their own length (no energy: the
+/// crack releases the spring's), the light corners at a crack's rim flew off again (edges 17 to
+/// 560 times their rest length in the storm of `faces_keep_their_shape_after_a_fracture_storm`,
+/// then UNSTABLE), with or without the pressure of the holes' caps; at half the stiffness and
+/// `rest` (the same energy and force) every spring kernel would need a stiffness per spring.
+pub(crate) fn opened_side_rest(length: f32, rest: f32) -> f32 {
+    if length > rest { length - (length - rest) * std::f32::consts::FRAC_1_SQRT_2 } else { rest }
 }
 
 /// Side (0..3) of `face` that is edge `edge` in `topology`.
@@ -216,6 +270,13 @@ pub(crate) fn rebuild_springs(
         from = e as usize + 1;
     }
     springs.rest.extend(springs.ends.iter().map(|&[a, b]| (rest[b as usize] - rest[a as usize]).length()));
+    // The sides of opened cracks at the lengths they opened at (the springs are in edge order,
+    // sorted by their ends).
+    for &(key, length) in fracture.map_or(&[][..], |f| &f.opened_rest) {
+        if let Ok(k) = springs.ends.binary_search(&key) {
+            springs.rest[k] = length;
+        }
+    }
     springs.build_adjacency(rest.len());
     springs
 }
@@ -239,6 +300,7 @@ mod tests {
         // Each round's springs are rebuilt into the buffers of the round before (as a crack
         // does): the same springs as a new build.
         let mut previous = build_springs(&topology, None, &rest);
+        let mut border_bits = 0;
         for round in 0..50 {
             let mut fracture = Fracture::new(rest.len(), triangles.len());
             for bits in &mut fracture.broken {
@@ -260,6 +322,13 @@ mod tests {
             assert_eq!(springs.ends, expected, "round {round}");
             let border = (0..topology.edges.len()).filter(|&e| topology.edge_face_count[e] == 1);
             assert!(border.clone().count() >= 6);
+            border_bits += border
+                .clone()
+                .filter(|&e| {
+                    let f = topology.edge_faces[e][0];
+                    side_of(&topology, f, e as u32).is_some_and(|side| fracture.is_broken(f, side))
+                })
+                .count();
             for e in border {
                 assert!(springs.ends.contains(&topology.edges[e]), "round {round}: border edge {e} lost its spring");
             }
@@ -268,6 +337,7 @@ mod tests {
                 assert_eq!(l, (rest[b as usize] - rest[a as usize]).length());
             }
         }
+        assert!(border_bits > 0, "no round marked a border side broken");
         assert_eq!(build_springs(&topology, None, &rest).ends, topology.edges);
     }
 }
