@@ -80,11 +80,16 @@ static int write_obj(const char *dir, unsigned frame, const Buffers *b, size_t n
 static void slit_ends(const uint32_t *triangles, size_t n_indices, uint32_t v, uint32_t ends[2]) {
   uint32_t ring[64];
   size_t count = 0;
-  for (size_t t = 0; t + 2 < n_indices; t += 3)
-    if (triangles[t] == v) {
-      ring[count++] = triangles[t + 1];
-      break;
-    }
+  for (size_t t = 0; t + 2 < n_indices && count == 0; t += 3)
+    for (int c = 0; c < 3; ++c)
+      if (triangles[t + c] == v) {
+        ring[count++] = triangles[t + (c + 1) % 3];
+        break;
+      }
+  if (count == 0) { /* v is in no triangle: a slit of nothing */
+    ends[0] = ends[1] = v;
+    return;
+  }
   /* Each face (v, a, b) in winding order leads from a to b: follow it until the ring closes. */
   while (count < 64) {
     uint32_t next = ring[0];
@@ -138,7 +143,7 @@ int main(int argc, char **argv) {
       /* Another mesh may burst under the gas alone before the prick: its edges are broken already. */
       printf("%5u: no pin prick, the balloon has burst already\n", step);
     } else if (step == PRICK_STEP) {
-      /* A pin prick: cut the three sides of the first triangle by hand. */
+      /* A pin prick: a slit of two edges through the first triangle's first corner. */
       status = fetch(body, &buffers, &n_floats, &n_indices);
       if (status != SOFTSHELL_STATUS_OK) {
         result = fail("copying positions and triangles", status);

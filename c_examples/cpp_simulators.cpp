@@ -68,7 +68,8 @@ void body_steps(const softshell::Mesh &mesh) {
   body.refresh(topology);
   for (int i = 0; i < 40; ++i) {
     if (i == 20) {
-      // Cut two edges of the first triangle by hand: the surface opens at their shared corner.
+      // Cut two edges of the first triangle by hand: their shared corner splits, freeing the
+      // triangle's corner (held in place by its sides' springs: no crack runs from such a cut).
       body.break_edge(topology.triangles[0], topology.triangles[1]);
       body.break_edge(topology.triangles[1], topology.triangles[2]);
     }

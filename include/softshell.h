@@ -270,10 +270,13 @@ typedef struct SoftshellBodyDef {
   float drag;
   // Spring strain `(length - rest)/rest` above which a spring breaks and the surface cracks,
   // in [0, 1e6]. 0 (default) = never. Only a spring between two faces breaks: once a crack
-  // opens, each of its two sides is an edge of one face and keeps a spring (of the same
-  // stiffness, at the rest length of the edge), as a cloth's border does; those never break, so
-  // every face keeps its three sides. A crack runs from where the surface opens: a pin prick
-  // that cuts a corner off one face opens nothing, a slit of two edges through a vertex does.
+  // opens, each of its two sides is an edge of one face and keeps a spring of the same
+  // stiffness (as a cloth's border does), which never breaks, so every face keeps its three
+  // sides. Their rest length is set where the crack opens so that the two sides hold the
+  // energy the broken spring held (each stretched by 1/√2 of its extension; together they
+  // pull √2 times as hard): a crack neither makes nor takes energy as it opens. A crack runs
+  // from a cut that opens the surface, a slit of two edges through a vertex; a cut that frees
+  // one face's corner loads no other spring (the sides hold the corner), so none runs from it.
   float break_strain;
   // Net force on a vertex, N, above which it is cut out as a core block, in [0, 1e12]: each
   // vertex at most once, and the vertices of a released block (and the centre of the patch it
@@ -325,7 +328,9 @@ typedef struct SoftshellBodyStats {
   // Energy error: (kinetic + spring + gas + gravitational energy) minus its initial value, the
   // work of wind and impulses, and the gas energy that leaks took away, J. Damping and
   // contacts make it negative; a growing positive value means the integrator is adding
-  // energy.
+  // energy. A topology change (a crack, a core block, a cut) moves no energy into the drift:
+  // what it takes or gives (a spring that broke, the gas of a shred) is left out, and the
+  // drift goes on from where it was.
   double energy_drift;
   // Springs broken during this step.
   uint64_t springs_broken;

@@ -51,9 +51,9 @@ def contract(mesh, frames):
 
 def burst(frames):
     sphere = softshell.Mesh.load_obj(os.path.join(ROOT, "data", "sphere.obj"))
-    body = softshell.Body(sphere, gas_amount=4500.0, break_strain=0.28, gravity=[0, 0, 0], spring_damping=2.0,
+    body = softshell.Body(sphere, gas_amount=4500.0, break_strain=0.27, gravity=[0, 0, 0], spring_damping=2.0,
                           time_step=1 / 120)
-    print(f"balloon: {body.vertex_count} vertices, gas nRT = 4500 J, cracks at 28% strain")
+    print(f"balloon: {body.vertex_count} vertices, gas nRT = 4500 J, cracks at 27% strain")
     changed, topology = body.refresh()
     positions = body.positions()
     pricked = False

@@ -719,7 +719,8 @@ class Body(_Handle):
     def cut_slit(self, vertex):
         """A pin prick: breaks the two edges from `vertex` to opposite sides of its ring of
         neighbours, a straight slit through it (a crack runs from a slit that opens; a cut that
-        only frees one face's corner opens nothing). Returns the slit's two ends."""
+        only frees one face's corner loads no other spring). `vertex` must be inside the surface
+        (a closed ring of faces around it). Returns the slit's two ends."""
         triangles = self.triangles()
         faces = triangles[(triangles == vertex).any(axis=1)]
         # Each face (vertex, a, b) in winding order leads from a to b around the ring.
@@ -728,8 +729,10 @@ class Body(_Handle):
             c = int(np.flatnonzero(face == vertex)[0])
             after[int(face[(c + 1) % 3])] = int(face[(c + 2) % 3])
         ring = [next(iter(after))]
-        while after[ring[-1]] != ring[0]:
+        while after.get(ring[-1], ring[0]) != ring[0] and len(ring) <= len(faces):
             ring.append(after[ring[-1]])
+        if len(ring) != len(faces) or after.get(ring[-1]) != ring[0]:
+            raise ValueError(f"vertex {vertex} has no closed ring of faces around it")
         ends = (ring[0], ring[len(ring) // 2])
         for end in ends:
             self.break_edge(end, vertex)

@@ -110,7 +110,7 @@ def contraction():
 
 def burst():
     sphere = softshell.Mesh.load_obj(os.path.join(ROOT, "data", "sphere.obj"))
-    body = softshell.Body(sphere, gas_amount=4500.0, break_strain=0.28, gravity=[0, 0, 0], spring_damping=2.0,
+    body = softshell.Body(sphere, gas_amount=4500.0, break_strain=0.27, gravity=[0, 0, 0], spring_damping=2.0,
                           time_step=1 / 120)
     frames = []
     for i in range(68):
