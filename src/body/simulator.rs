@@ -1246,9 +1246,11 @@ impl Body {
         if let Scratch::Implicit(s) = &mut self.scratch {
             s.forget_prepared();
         }
+        let t = Instant::now();
         if let Some(fracture) = self.fracture.as_mut() {
             fracture.record_opened_sides(&topology, &self.nodes.x, &self.nodes.rest);
         }
+        trace_phase("opened sides", t);
         self.rebuild(topology, &old_face_fragment);
         if let Some(fracture) = self.fracture.as_mut() {
             fracture.face_fragment_before = old_face_fragment;
