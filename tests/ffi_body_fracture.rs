@@ -708,3 +708,34 @@ fn a_cut_along_a_border_is_refused_and_changes_nothing() {
     assert_eq!((after.generation, after.vertex_count()), (cut.generation, cut.vertex_count()));
     step(&b);
 }
+
+/// A spring on a border does not break: a cloth's corner (one face, two border springs), the
+/// rest pinned, thrown away stretches its two springs far past `break_strain`; nothing cracks,
+/// and the generation and the counts stay.
+#[test]
+fn border_springs_over_the_limit_break_nothing() {
+    let (positions, triangles) = cloth(4, 1.0);
+    assert_eq!(triangles.chunks_exact(3).filter(|t| t.contains(&0)).count(), 1, "vertex 0 is a corner of one face");
+    let mut def = softshell_body_def_default();
+    def.gas_amount = 0.0;
+    def.gravity = [0.0; 3];
+    def.break_strain = 0.2;
+    let b = body(&positions, &triangles, &def);
+    // Every other vertex pinned: only the corner's two springs stretch.
+    for v in 1..16 {
+        // SAFETY: live body.
+        assert_eq!(unsafe { softshell_body_pin_vertex(b.0, v) }, SoftshellStatus::Ok);
+    }
+    let start = snapshot(&b);
+    // SAFETY: live body.
+    assert_eq!(unsafe { softshell_body_apply_impulse(b.0, 0, [-3.0, 3.0, 0.0].as_ptr()) }, SoftshellStatus::Ok);
+    let mut most = 0.0f64;
+    for _ in 0..30 {
+        let stats = step(&b);
+        most = most.max(stats.max_strain);
+        assert_eq!(stats.springs_broken, 0);
+        assert_eq!((stats.topology_generation, stats.vertex_count), (start.generation, start.vertex_count()));
+    }
+    println!("the corner's springs stretched by up to {most:.2}");
+    assert!(most > 2.0 * 0.2, "the corner was not pulled hard enough: strain {most}");
+}
