@@ -274,7 +274,10 @@ typedef struct SoftshellBodyDef {
   // stiffness (as a cloth's border does), which never breaks, so every face keeps its three
   // sides. Their rest length is set where the crack opens so that the two sides hold the
   // energy the broken spring held (each stretched by 1/√2 of its extension; together they
-  // pull √2 times as hard): a crack neither makes nor takes energy as it opens. A crack runs
+  // pull √2 times as hard): a spring that breaks and opens in one change makes and takes no
+  // energy (one that broke earlier without opening gave its energy up then, and its sides
+  // take that much back when they open). Their strain (`max_strain`) is measured against
+  // that rest length. A crack runs
   // from a cut that opens the surface, a slit of two edges through a vertex; a cut that frees
   // one face's corner loads no other spring (the sides hold the corner), so none runs from it.
   float break_strain;

@@ -143,7 +143,8 @@ fn a_slit_ball_tears_and_leaks_its_gas_out_through_the_crack() {
                 (broken, last_crack) = (broken + stats.springs_broken, Some(k));
             }
             fragments = stats.fragment_count;
-            gas.push(gas_of(&stats));
+            // (NaN where a piece's volume is clamped: its gas is then not pressure x volume.)
+            gas.push(if stats.volume_clamped { f64::NAN } else { gas_of(&stats) });
             cracked.push(stats.springs_broken > 0);
         }
         (gas, cracked, broken, last_crack.expect("the crack must run from the slit"), fragments)
@@ -159,7 +160,7 @@ fn a_slit_ball_tears_and_leaks_its_gas_out_through_the_crack() {
     assert!(fragments <= 8, "the ball broke into {fragments} pieces");
     for (k, pair) in gas[last_crack..].windows(2).enumerate() {
         let share = pair[1] / pair[0];
-        assert!(share > 0.95 && share < 0.9999, "step {}: nRT {:.3} -> {:.3} J", last_crack + k + 1, pair[0], pair[1]);
+        assert!(share > 0.975 && share < 0.9999, "step {}: nRT {:.3} -> {:.3} J", last_crack + k + 1, pair[0], pair[1]);
     }
     assert!(
         gas[last_crack + 80] < 0.9 * gas[last_crack],
@@ -169,10 +170,13 @@ fn a_slit_ball_tears_and_leaks_its_gas_out_through_the_crack() {
     );
     // Without a leak the gas changes only at a crack (the pressure then stays up, and the crack
     // runs on: pieces cut loose take their share, shreds none).
-    let (kept, cracked, broken, last_crack, _) = run(0.0);
+    let (kept, cracked, broken, last_crack, fragments) = run(0.0);
+    assert!(fragments > 100, "without a leak the crack must run on: {fragments} pieces");
     println!("leak 0: {broken} springs cracked, the last at step {last_crack}; nRT at the end {:.2} J", kept[159]);
+    let mut compared = 0;
     for k in 1..160 {
-        if !cracked[k] {
+        if !cracked[k] && !kept[k].is_nan() && !kept[k - 1].is_nan() {
+            compared += 1;
             assert!(kept[k - 1] > 0.0, "step {k}: no gas left without a leak");
             assert!(
                 (kept[k] / kept[k - 1] - 1.0).abs() < 1e-6,
@@ -182,6 +186,7 @@ fn a_slit_ball_tears_and_leaks_its_gas_out_through_the_crack() {
             );
         }
     }
+    assert!(compared >= 80, "only {compared} steps without a crack or a clamped piece to compare");
 }
 
 /// A spring cracks exactly when its strain passes `break_strain`: with the limit at the largest
@@ -633,7 +638,7 @@ fn worst_side_stretch(s: &Snapshot, input: &[f32]) -> f64 {
 /// crack opens (two sides, two springs), and only springs between two faces break. A ball
 /// holding far more gas than its springs bear (nRT 850 J, K_s 400 N/m, breaking at 12.5%)
 /// bursts within a few steps into hundreds of pieces; over 60 steps no face side grows past 3
-/// times its rest length (at most 1.31 with implicit Euler, 1.47 with XPBD, measured). Before,
+/// times its rest length (at most 1.40 with implicit Euler, 1.47 with XPBD, measured). Before,
 /// the sides of an opened crack had no spring: in the step after the storm faces had sides 17
 /// times their rest length, 1,400 times 55 steps later, and the reported volume (of the pieces'
 /// caps) grew to thousands of m³.

@@ -723,6 +723,8 @@ class Body(_Handle):
         (a closed ring of faces around it). Returns the slit's two ends."""
         triangles = self.triangles()
         faces = triangles[(triangles == vertex).any(axis=1)]
+        if len(faces) == 0:
+            raise ValueError(f"vertex {vertex} is in no face")
         # Each face (vertex, a, b) in winding order leads from a to b around the ring.
         after = {}
         for face in faces:

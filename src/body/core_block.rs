@@ -145,12 +145,19 @@ pub(crate) fn release(
         let j = (i + 1) % k;
         // Fan face i runs u_i -> u_j; the surface cap face takes its place over that edge.
         let fan = triangles[ring_faces[i] as usize];
-        let side = (0..3).find(|&s| fan[s] == copies[i] && fan[(s + 1) % 3] == copies[j]).unwrap_or(0);
+        let side = (0..3)
+            .find(|&s| fan[s] == copies[i] && fan[(s + 1) % 3] == copies[j])
+            .expect("a fan face runs from one ring copy to the next (closed_ring)");
         let bit = fracture.broken[ring_faces[i] as usize] & (1 << side) != 0;
         // The fan face now shares that side with the block's cap, not with the face across the
         // crack: its bit moves to the surface cap (which meets that face), or the side would
         // count as a broken edge of two faces and lose its spring.
         fracture.broken[ring_faces[i] as usize] &= !(1 << side);
+        // A crack's side keeps its rest length on both faces that now hold it: the surface cap
+        // (the crack's side still) and the fan face (now a side of the block, as stretched).
+        if let Some(length) = fracture.opened_side(ring_faces[i], side) {
+            fracture.set_opened_side(triangles.len() as u32, 1, length);
+        }
         triangles.push([c_surface, ring[i], ring[j]]);
         fracture.broken.push(if bit { 1 << 1 } else { 0 });
         triangles.push([c_block, copies[j], copies[i]]);

@@ -70,10 +70,11 @@ pub(crate) struct Fracture {
     /// the centre of the patch it left: they release no block themselves (see
     /// `core_block::release`).
     pub in_core: Vec<bool>,
-    /// The rest length of each side of an opened crack (an edge of one face with a broken bit),
-    /// by its end vertices (sorted), set when the crack opened there ([`opened_side_rest`]);
-    /// sorted by those vertices (a vector, not a map, so that its memory is known to the byte).
-    pub opened_rest: Vec<([u32; 2], f32)>,
+    /// The rest length of each side of an opened crack, by face and side (`3 face + side`:
+    /// faces keep their index through every split, where a side's vertices may be renamed),
+    /// sorted by that key, set when the crack opened there ([`opened_side_rest`]). A vector,
+    /// not a map, so that its memory is known to the byte.
+    pub opened_rest: Vec<(u32, f32)>,
 }
 
 impl Fracture {
@@ -90,29 +91,42 @@ impl Fracture {
     }
 
     /// Records the rest length of every side of an opened crack in `topology` (that of the
-    /// current triangles) that has none yet ([`opened_side_rest`] of its length at positions `x`
-    /// and its rest length from `rest`); sides no longer in the mesh (split again since) are
-    /// forgotten.
+    /// current triangles) that has none yet: [`opened_side_rest`] of its length at positions
+    /// `x` and its rest length from `rest`. A side keeps what it was given when its crack opened,
+    /// through later splits of its ends (as the crack runs on) and core blocks.
     pub fn record_opened_sides(&mut self, topology: &Topology, x: &[Vec3], rest: &[Vec3]) {
-        let mut sides = Vec::with_capacity(self.opened_rest.len());
+        let known = self.opened_rest.len();
         for (f, &bits) in self.broken.iter().enumerate().filter(|(_, b)| **b != 0) {
             for side in (0..3).filter(|&side| bits & (1 << side) != 0) {
                 let e = topology.face_edges[f][side];
-                if e == u32::MAX || topology.edge_face_count[e as usize] != 1 {
+                let key = 3 * f as u32 + side as u32;
+                if e == u32::MAX
+                    || topology.edge_face_count[e as usize] != 1
+                    || self.opened_rest[..known].binary_search_by_key(&key, |&(k, _)| k).is_ok()
+                {
                     continue;
                 }
-                let key = topology.edges[e as usize];
-                let [a, b] = key.map(|v| v as usize);
-                let length = match self.opened_rest.binary_search_by_key(&key, |&(k, _)| k) {
-                    Ok(i) => self.opened_rest[i].1,
-                    Err(_) => opened_side_rest((x[b] - x[a]).length(), (rest[b] - rest[a]).length()),
-                };
-                sides.push((key, length));
+                let [a, b] = topology.edges[e as usize].map(|v| v as usize);
+                self.opened_rest.push((key, opened_side_rest((x[b] - x[a]).length(), (rest[b] - rest[a]).length())));
             }
         }
-        // (A side is seen from its one face only once; the sort makes the lookups above work.)
-        sides.sort_unstable_by_key(|&(k, _)| k);
-        self.opened_rest = sides;
+        self.opened_rest.sort_unstable_by_key(|&(k, _)| k);
+    }
+
+    /// The rest length recorded for side `side` of face `face`, if its crack has opened.
+    pub fn opened_side(&self, face: u32, side: usize) -> Option<f32> {
+        let key = 3 * face + side as u32;
+        self.opened_rest.binary_search_by_key(&key, |&(k, _)| k).ok().map(|i| self.opened_rest[i].1)
+    }
+
+    /// Gives side `side` of face `face` the rest length `length` (a core block's cap taking the
+    /// place of a crack's side).
+    pub fn set_opened_side(&mut self, face: u32, side: usize, length: f32) {
+        let key = 3 * face + side as u32;
+        match self.opened_rest.binary_search_by_key(&key, |&(k, _)| k) {
+            Ok(i) => self.opened_rest[i].1 = length,
+            Err(i) => self.opened_rest.insert(i, (key, length)),
+        }
     }
 
     /// True when vertex `i` belongs to a released core block or is the centre of a patch one
@@ -152,7 +166,7 @@ impl Fracture {
             + self.spare.memory_bytes()
             + self.before.capacity() * 12
             + self.in_core.capacity()
-            + self.opened_rest.capacity() * std::mem::size_of::<([u32; 2], f32)>()
+            + self.opened_rest.capacity() * std::mem::size_of::<(u32, f32)>()
     }
 
     /// Appends a vertex at `x` with velocity `v` and `mass`, split from `from` (pinned if `from`
@@ -176,7 +190,7 @@ impl Fracture {
 }
 
 /// The rest length of a side of a crack that opened at length `length`, of an edge of rest
-/// length `rest`: `length - (length - rest)/√2` when stretched, else `rest`.
+/// length `rest`: `length - (length - rest)/√2` (stretched or compressed; always positive).
 ///
 /// Why: each side of an opened crack keeps a spring, so that no face corner is held by nothing
 /// (without, faces stretched to 1,400 times their rest length after a storm). At `rest`, the
@@ -184,15 +198,17 @@ impl Fracture {
 /// crack would make energy (a review measured a storm step take the springs' energy from 110.7
 /// to 123.5 J), and the sides, born over the break limit, would keep the strain scan running
 /// every step. At this length the two sides together hold exactly the energy of the spring that
-/// broke (`2 · K_s ((l - L0)/√2)²/2`), so the split neither makes nor takes energy, and each is
-/// stretched by `1/√2` of the broken spring's extension (under the limit that broke it). The
-/// price: their pull together is √2 times the spring's. At their own length (no energy: the
+/// broke (`2 · K_s ((l - L0)/√2)²/2`), so a spring that breaks and opens in the same change
+/// makes and takes no energy, and each side is stretched by `1/√2` of its extension (under the
+/// limit, unless the spring passed √2 times it within one step). An edge that broke earlier
+/// without opening gave its energy up then, and its sides take `K_s (l - L0)²/2` back when it
+/// opens. The price: their pull together is √2 times the spring's. At their own length (no energy: the
 /// crack releases the spring's), the light corners at a crack's rim flew off again (edges 17 to
 /// 560 times their rest length in the storm of `faces_keep_their_shape_after_a_fracture_storm`,
 /// then UNSTABLE), with or without the pressure of the holes' caps; at half the stiffness and
 /// `rest` (the same energy and force) every spring kernel would need a stiffness per spring.
 pub(crate) fn opened_side_rest(length: f32, rest: f32) -> f32 {
-    if length > rest { length - (length - rest) * std::f32::consts::FRAC_1_SQRT_2 } else { rest }
+    length - (length - rest) * std::f32::consts::FRAC_1_SQRT_2
 }
 
 /// Side (0..3) of `face` that is edge `edge` in `topology`.
@@ -273,7 +289,11 @@ pub(crate) fn rebuild_springs(
     // The sides of opened cracks at the lengths they opened at (the springs are in edge order,
     // sorted by their ends).
     for &(key, length) in fracture.map_or(&[][..], |f| &f.opened_rest) {
-        if let Ok(k) = springs.ends.binary_search(&key) {
+        let e = topology.face_edges[(key / 3) as usize][(key % 3) as usize];
+        if e == u32::MAX {
+            continue;
+        }
+        if let Ok(k) = springs.ends.binary_search(&topology.edges[e as usize]) {
             springs.rest[k] = length;
         }
     }
