@@ -202,11 +202,12 @@ impl Fracture {
 /// makes and takes no energy, and each side is stretched by `1/√2` of its extension (under the
 /// limit, unless the spring passed √2 times it within one step). An edge that broke earlier
 /// without opening gave its energy up then, and its sides take `K_s (l - L0)²/2` back when it
-/// opens. The price: their pull together is √2 times the spring's. At their own length (no energy: the
-/// crack releases the spring's), the light corners at a crack's rim flew off again (edges 17 to
-/// 560 times their rest length in the storm of `faces_keep_their_shape_after_a_fracture_storm`,
-/// then UNSTABLE), with or without the pressure of the holes' caps; at half the stiffness and
-/// `rest` (the same energy and force) every spring kernel would need a stiffness per spring.
+/// opens. The price: their pull together is √2 times the spring's. At their own length (no
+/// energy: the crack releases the spring's), the light corners at a crack's rim flew off again
+/// (edges 17 to 560 times their rest length in the storm of
+/// `faces_keep_their_shape_after_a_fracture_storm`, then UNSTABLE), with or without the
+/// pressure of the holes' caps; at half the stiffness and `rest` (the same energy and force)
+/// every spring kernel would need a stiffness per spring.
 pub(crate) fn opened_side_rest(length: f32, rest: f32) -> f32 {
     length - (length - rest) * std::f32::consts::FRAC_1_SQRT_2
 }
@@ -257,7 +258,8 @@ fn broken_edges(topology: &Topology, fracture: Option<&Fracture>) -> Vec<u32> {
 }
 
 /// One spring per edge but the broken ones that still join two faces ([`edge_is_broken`]), with
-/// rest length `|X_a - X_b|` from the rest positions.
+/// rest length `|X_a - X_b|` from the rest positions, or for a side of an opened crack the one
+/// it was given when it opened ([`Fracture::opened_rest`]).
 pub(crate) fn build_springs(topology: &Topology, fracture: Option<&Fracture>, rest: &[Vec3]) -> Springs {
     rebuild_springs(topology, fracture, rest, Springs::default())
 }
