@@ -173,7 +173,9 @@ macro_rules! model_of {
 /// The fraction by which a body that may crack has room to grow (vertices, edges, faces) in the
 /// buffers the fracture writes: within it a cracking step moves no array and allocates no large
 /// one. Measured on the issue-5 balloon's first cracking step (benches/body_balloon.rs, 276
-/// springs, 231 page faults in the topology update before, 0.9 MB of new arrays). More room
+/// springs, 231 page faults in the topology update before, 0.9 MB of new arrays; the springs,
+/// rebuilt into arrays without room, took 0.48-0.83 ms with the gas beside them, 0.32-0.35 ms
+/// with it: medians of 30 first cracks on 2 threads). More room
 /// does not pay for the storm that follows (1,300-1,600 springs a step): with room to double,
 /// its topology updates still take 3.2-4.8 ms, the work on some 5,000 changed faces, not the
 /// memory.
@@ -283,7 +285,7 @@ impl Body {
         let mass: Vec<f32> = lumped.iter().map(|&a| (settings.total_mass as f64 * a / area) as f32).collect();
         let inv_mass = mass.iter().map(|&m| if m > 0.0 { 1.0 / m } else { 0.0 }).collect();
         let mut nodes = Nodes { v: vec![Vec3::ZERO; n], rest: x.clone(), x, mass, inv_mass };
-        let springs = build_springs(topology, None, &nodes.rest);
+        let mut springs = build_springs(topology, None, &nodes.rest);
         let face_fragment = topology.face_components.clone();
         let fragment_count = topology.component_count;
         let gas = (settings.gas_amount > 0.0).then(|| {
@@ -312,6 +314,7 @@ impl Body {
         });
         if settings.fracture_enabled() {
             nodes.reserve((n as f64 * FRACTURE_HEADROOM).ceil() as usize);
+            springs.reserve_headroom(FRACTURE_HEADROOM);
         }
         let mut obstacles = Vec::new();
         if settings.ground {

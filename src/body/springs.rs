@@ -24,34 +24,67 @@ pub(crate) struct Springs {
 impl Springs {
     /// Builds the per-vertex adjacency for `vertex_count` vertices.
     pub fn build_adjacency(&mut self, vertex_count: usize) {
-        // Into the old buffers (see `surface::rebuild_springs`).
+        // Into the old buffers (see `surface::rebuild_springs`). A counting sort without a
+        // second array of cursors: counted at `offsets[v + 2]`, summed so that `offsets[v + 1]`
+        // is where vertex v's springs start, which the scatter then moves on to where they end,
+        // the next vertex's start (a copy of the offsets as cursors was a fresh allocation at
+        // every topology change).
         let mut offsets = std::mem::take(&mut self.offsets);
         offsets.clear();
-        offsets.resize(vertex_count + 1, 0);
+        offsets.resize(vertex_count + 2, 0);
         for &[i, j] in &self.ends {
             debug_assert!(i < j, "spring ends must be ordered: [{i}, {j}]");
-            offsets[i as usize + 1] += 1;
-            offsets[j as usize + 1] += 1;
+            offsets[i as usize + 2] += 1;
+            offsets[j as usize + 2] += 1;
         }
-        for v in 0..vertex_count {
-            offsets[v + 1] += offsets[v];
+        for v in 2..vertex_count + 2 {
+            offsets[v] += offsets[v - 1];
         }
-        let mut cursor = offsets.clone();
         let mut adjacency = std::mem::take(&mut self.adjacency);
         adjacency.clear();
         adjacency.resize(2 * self.ends.len(), (0, 0));
         for (k, &[i, j]) in self.ends.iter().enumerate() {
-            adjacency[cursor[i as usize] as usize] = (k as u32, j);
-            cursor[i as usize] += 1;
-            adjacency[cursor[j as usize] as usize] = (k as u32, i);
-            cursor[j as usize] += 1;
+            let slot = &mut offsets[i as usize + 1];
+            adjacency[*slot as usize] = (k as u32, j);
+            *slot += 1;
+            let slot = &mut offsets[j as usize + 1];
+            adjacency[*slot as usize] = (k as u32, i);
+            *slot += 1;
         }
+        offsets.pop();
         self.offsets = offsets;
         self.adjacency = adjacency;
         // Unique over the process, not per body: a copy of a body's springs keeps its id, and
         // an id is never reused for another adjacency.
         static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
         self.adjacency_id = NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Room for a fraction `headroom` more springs and vertices in every array, its memory
+    /// written now: a topology change rebuilds the springs into these arrays
+    /// (`surface::rebuild_springs`), and within that room moves none of them (a reallocation
+    /// copies the old contents, and new memory faults its pages in one by one on first use).
+    pub fn reserve_headroom(&mut self, headroom: f64) {
+        fn with_room<T: Copy + Default>(v: &mut Vec<T>, headroom: f64) {
+            let room = v.len() + (v.len() as f64 * headroom).ceil() as usize;
+            if v.capacity() >= room {
+                return;
+            }
+            let len = v.len();
+            let mut roomy = Vec::with_capacity(room);
+            roomy.extend_from_slice(v);
+            // Written once past the end (`resize`; `vec![0; n]` would not touch fresh pages).
+            roomy.resize(room, T::default());
+            roomy.truncate(len);
+            *v = roomy;
+        }
+        with_room(&mut self.ends, headroom);
+        with_room(&mut self.rest, headroom);
+        with_room(&mut self.adjacency, headroom);
+        // The offsets take one more entry while they are built.
+        self.offsets.push(0);
+        with_room(&mut self.offsets, headroom);
+        self.offsets.pop();
     }
 
     /// (spring, other end) pairs around vertex `i`.

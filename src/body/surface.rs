@@ -307,6 +307,48 @@ pub(crate) fn rebuild_springs(
 mod tests {
     use super::*;
 
+    /// Springs given room by `reserve_headroom` are rebuilt into the same arrays while they
+    /// fit (a crack splits vertices and adds edges), with the same springs and adjacency as a
+    /// new build; beyond the room they grow as before.
+    #[test]
+    fn springs_rebuilt_within_their_room_keep_their_arrays() {
+        let triangles = crate::mesh::torus_grid(12, 10);
+        let vertices = 120;
+        let rest: Vec<Vec3> =
+            (0..vertices + 40).map(|k| Vec3::new(k as f32, (k * k % 11) as f32, 0.25 * k as f32)).collect();
+        let mut springs = build_springs(&Topology::build(&triangles, vertices), None, &rest[..vertices]);
+        springs.reserve_headroom(0.125);
+        let arrays = |s: &Springs| {
+            [
+                s.ends.as_ptr() as usize,
+                s.rest.as_ptr() as usize,
+                s.offsets.as_ptr() as usize,
+                s.adjacency.as_ptr() as usize,
+            ]
+        };
+        let held = arrays(&springs);
+        let mut current = triangles.clone();
+        // Each round gives one more face corner a new vertex (a split fan: 2 more edges), then
+        // rebuilds; 360 edges with room for 45 more.
+        for round in 0..40usize {
+            current[3 * round][0] = (vertices + round) as u32;
+            let count = vertices + round + 1;
+            let topology = Topology::build(&current, count);
+            let fresh = build_springs(&topology, None, &rest[..count]);
+            springs = rebuild_springs(&topology, None, &rest[..count], springs);
+            assert_eq!(
+                (&springs.ends, &springs.rest, &springs.offsets, &springs.adjacency),
+                (&fresh.ends, &fresh.rest, &fresh.offsets, &fresh.adjacency),
+                "round {round}"
+            );
+            let room = (360.0f64 * 0.125).ceil() as usize;
+            if springs.ends.len() <= 360 + room && count <= vertices + (vertices as f64 * 0.125).ceil() as usize {
+                assert_eq!(arrays(&springs), held, "round {round}: an array moved within the room");
+            }
+        }
+        assert!(springs.ends.len() > 360 + 45, "the rounds must outgrow the room: {}", springs.ends.len());
+    }
+
     #[test]
     fn springs_skip_exactly_the_broken_edges() {
         // A torus grid with a few duplicated faces (non-manifold edges, where only the first two
