@@ -412,25 +412,35 @@ fn main() {
     }
     // The storm steps against themselves: the same state stepped with and without its fracture
     // phase (the rows above compare them with a ball that holds, whose solve is another's).
+    // The first cracking step too: the rows above time it once, against the plain ball's step.
+    // BODY_CRACK_SAMPLES=<k>: k samples of each step instead of 3.
     if let Some(c) = best {
-        println!("the same storm steps, each against the same state stepped without its fracture phase (median of 3):");
-        for step in c.step + 1..=c.step + storms.iter().map(Vec::len).min().unwrap_or(0) {
-            let mut runs: Vec<SameState> =
-                (0..3).filter_map(|r| same_state_cost(&positions, &triangles, &cracking, step, r % 2 == 1)).collect();
+        let samples = std::env::var("BODY_CRACK_SAMPLES").ok().and_then(|v| v.parse().ok()).unwrap_or(3usize).max(1);
+        println!(
+            "the first cracking step and the storm steps, each against the same state stepped without its fracture \
+             phase (median of {samples}):"
+        );
+        for step in c.step..=c.step + storms.iter().map(Vec::len).min().unwrap_or(0) {
+            let mut runs: Vec<SameState> = (0..samples)
+                .filter_map(|r| same_state_cost(&positions, &triangles, &cracking, step, r % 2 == 1))
+                .collect();
             if runs.is_empty() {
                 println!("  step {step}: not measured (a step failed)");
                 continue;
             }
             runs.sort_by(|a, b| (a.crack / a.same).total_cmp(&(b.crack / b.same)));
+            let mut phases: Vec<f64> = runs.iter().map(|r| r.crack - r.same).collect();
+            phases.sort_by(f64::total_cmp);
             let m = &runs[runs.len() / 2];
             println!(
                 "  step {step}: {} springs broken in {:.2} ms; the same step without its fracture phase {:.2} ms \
-                 ({} CG it. in both): {:.2} x",
+                 ({} CG it. in both): {:.2} x (the difference: {:.2} ms, median of all)",
                 m.broken,
                 m.crack * 1e3,
                 m.same * 1e3,
                 m.iterations,
-                m.crack / m.same
+                m.crack / m.same,
+                phases[phases.len() / 2] * 1e3
             );
         }
     }
@@ -444,10 +454,13 @@ struct SameState {
     iterations: u64,
 }
 
-/// Two bodies with the `cracking` settings stepped alike up to `step` (the steps are
-/// deterministic: their states are checked equal, bit for bit), then step `step` of one with
-/// its fracture phase and of the other without it, timed (`other_first`: the one without
-/// steps first). None when a step failed or the states differ.
+/// Step `step` of a body with the `cracking` settings, timed with its fracture phase and, on a
+/// second body made and stepped alike, without it (`other_first`: that one first). The bodies
+/// are made, stepped and freed one after the other, so that no other body's pool sleeps beside
+/// the one timed (twins stepped in turn timed their steps after their workers had slept through
+/// the other's: the same step measured 0.8-3x itself). The steps are deterministic: the two
+/// states before the timed step are checked equal, bit for bit. None when a step failed or the
+/// states differ.
 fn same_state_cost(
     positions: &[f32],
     triangles: &[u32],
@@ -455,42 +468,32 @@ fn same_state_cost(
     step: usize,
     other_first: bool,
 ) -> Option<SameState> {
-    let handles = [new_body(positions, triangles, cracking), new_body(positions, triangles, cracking)];
-    // SAFETY: live handles, made above, used only here and freed below.
-    let [a, b] = handles.map(|h| unsafe { &mut *h }.body_mut() as *mut softshell::body::Body);
-    // SAFETY: two distinct live bodies.
-    let (a, b) = unsafe { (&mut *a, &mut *b) };
-    let mut result = None;
-    'measure: {
-        for _ in 0..step {
-            if a.step().is_err() || b.step().is_err() {
-                break 'measure;
-            }
-        }
-        if !a.positions().eq(b.positions()) || !a.velocities().eq(b.velocities()) || !a.triangles().eq(b.triangles()) {
-            eprintln!("same_state_cost: the twin bodies differ at step {step}");
-            break 'measure;
-        }
-        let mut timed_without = || {
+    // The state before the timed step (positions and velocities), its time and stats.
+    let timed_at = |with_fracture: bool| {
+        let handle = new_body(positions, triangles, cracking);
+        // SAFETY: a live handle, made above, used only here and freed below.
+        let body = unsafe { &mut *handle }.body_mut();
+        let mut result = None;
+        if (0..step).all(|_| body.step().is_ok()) {
+            let state: (Vec<_>, Vec<_>) = (body.positions().collect(), body.velocities().collect());
             let started = Instant::now();
-            let stats = b.step_without_fracture();
-            (started.elapsed().as_secs_f64(), stats)
-        };
-        let before = if other_first { Some(timed_without()) } else { None };
-        let started = Instant::now();
-        let with = a.step();
-        let crack = started.elapsed().as_secs_f64();
-        let (same, without) = before.unwrap_or_else(timed_without);
-        if let (Ok(with), Ok(without)) = (with, without) {
-            assert_eq!(with.solver_iterations, without.solver_iterations, "the same solve in both");
-            result = Some(SameState { crack, same, broken: with.springs_broken, iterations: with.solver_iterations });
+            let stats = if with_fracture { body.step() } else { body.step_without_fracture() };
+            let seconds = started.elapsed().as_secs_f64();
+            result = stats.ok().map(|stats| (state, seconds, stats));
         }
+        // SAFETY: made above, freed once.
+        unsafe { softshell_body_free(handle) };
+        result
+    };
+    let (first, second) = (timed_at(!other_first)?, timed_at(other_first)?);
+    let ((with_state, crack, with), (without_state, same, without)) =
+        if other_first { (second, first) } else { (first, second) };
+    if with_state != without_state {
+        eprintln!("same_state_cost: the two bodies differ at step {step}");
+        return None;
     }
-    // SAFETY: made above, freed once each.
-    unsafe {
-        handles.iter().for_each(|&h| softshell_body_free(h));
-    }
-    result
+    assert_eq!(with.solver_iterations, without.solver_iterations, "the same solve in both");
+    Some(SameState { crack, same, broken: with.springs_broken, iterations: with.solver_iterations })
 }
 
 /// Steps a body with `plain` and one with `cracking` settings in lockstep until the cracking one
