@@ -888,7 +888,10 @@ impl Gas {
             };
             self.assign(f, gas, volume);
         }
-        self.measure(x, triangles, new_face_fragment);
+        // The volumes are those measured above (the positions have not moved): only the
+        // pressures follow the new nRT (a second measurement was a pass over every face, about
+        // 0.07 ms of the issue-5 balloon's first cracking step).
+        self.refresh_pressures();
     }
 
     pub fn memory_bytes(&self) -> usize {
