@@ -288,15 +288,16 @@ pub(crate) fn rebuild_springs(
         from = e as usize + 1;
     }
     springs.rest.extend(springs.ends.iter().map(|&[a, b]| (rest[b as usize] - rest[a as usize]).length()));
-    // The sides of opened cracks at the lengths they opened at (the springs are in edge order,
-    // sorted by their ends).
+    // The sides of opened cracks at the lengths they opened at. The springs are the edges in
+    // order without the broken ones, so edge e's spring is e less the broken edges before it
+    // (a search in the few broken edges, not in the springs).
     for &(key, length) in fracture.map_or(&[][..], |f| &f.opened_rest) {
         let e = topology.face_edges[(key / 3) as usize][(key % 3) as usize];
         if e == u32::MAX {
             continue;
         }
-        if let Ok(k) = springs.ends.binary_search(&topology.edges[e as usize]) {
-            springs.rest[k] = length;
+        if let Err(before) = broken.binary_search(&e) {
+            springs.rest[e as usize - before] = length;
         }
     }
     springs.build_adjacency(rest.len());
