@@ -244,7 +244,17 @@ impl Topology {
     /// Number of fans (groups of faces joined through manifold edges) around vertex `v`.
     pub fn fan_count(&self, triangles: &[[u32; 3]], v: u32) -> usize {
         let faces = self.faces_of_vertex(v);
-        let mut parent: Vec<u32> = (0..faces.len() as u32).collect();
+        // The union-find on the stack for the usual few faces (an update asks this of thousands
+        // of vertices: a vector each was an allocation each).
+        let mut on_stack = [0u32; 32];
+        let mut on_heap = Vec::new();
+        let parent: &mut [u32] = if faces.len() <= on_stack.len() {
+            &mut on_stack[..faces.len()]
+        } else {
+            on_heap.resize(faces.len(), 0);
+            &mut on_heap
+        };
+        parent.iter_mut().enumerate().for_each(|(i, p)| *p = i as u32);
         for (i, &face) in faces.iter().enumerate() {
             for side in 0..3 {
                 let t = triangles[face as usize];
@@ -258,11 +268,11 @@ impl Topology {
                 let [f0, f1] = self.edge_faces[edge as usize];
                 let other = if f0 == face { f1 } else { f0 };
                 if let Some(j) = faces.iter().position(|&f| f == other) {
-                    union(&mut parent, i as u32, j as u32);
+                    union(parent, i as u32, j as u32);
                 }
             }
         }
-        (0..faces.len() as u32).filter(|&i| find(&mut parent, i) == i).count()
+        (0..faces.len() as u32).filter(|&i| find(parent, i) == i).count()
     }
 
     /// Vertices with more than one fan ([`Topology::fan_count`] for all vertices at once): a
@@ -305,35 +315,55 @@ impl Topology {
     /// The boundary loops of [`Topology::boundary_loops`], from the edges and face edges.
     fn boundary_loops_of(&self, triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
         let mut loops = Vec::new();
-        // Directed boundary half-edges (a -> b as the face runs), keyed by their start vertex.
-        let mut outgoing: Vec<(u32, u32)> = Vec::new();
-        for (edge, &count) in self.edge_face_count.iter().enumerate() {
-            if count != 1 {
-                continue;
-            }
+        // Directed boundary half-edges (a -> b as the face runs), grouped by their start vertex
+        // a (counted, then placed: a sort of all of them took a third of this in a fracture
+        // storm of the issue-5 balloon, some 5,000 of them), each group in order of b; so the
+        // walks below visit them in the order of the pairs (a, b).
+        let vertex_count = self.vertex_face_offsets.len().saturating_sub(1);
+        let boundary = |edge: usize| {
             let face = self.edge_faces[edge][0] as usize;
             let side = self.face_edges[face].iter().position(|&e| e == edge as u32).unwrap();
-            outgoing.push((triangles[face][side], triangles[face][(side + 1) % 3]));
+            (triangles[face][side], triangles[face][(side + 1) % 3])
+        };
+        let mut start = vec![0u32; vertex_count + 2];
+        for (edge, _) in self.edge_face_count.iter().enumerate().filter(|&(_, &count)| count == 1) {
+            start[boundary(edge).0 as usize + 2] += 1;
         }
-        outgoing.sort_unstable();
-        let mut used = vec![false; outgoing.len()];
-        for first in 0..outgoing.len() {
+        for v in 2..vertex_count + 2 {
+            start[v] += start[v - 1];
+        }
+        let mut end = vec![0u32; start[vertex_count + 1] as usize];
+        for (edge, _) in self.edge_face_count.iter().enumerate().filter(|&(_, &count)| count == 1) {
+            let (a, b) = boundary(edge);
+            let slot = &mut start[a as usize + 1];
+            end[*slot as usize] = b;
+            *slot += 1;
+        }
+        start.pop();
+        // `start[a]..start[a + 1]`: the ends of the half-edges from a.
+        for a in 0..vertex_count {
+            let group = &mut end[start[a] as usize..start[a + 1] as usize];
+            if group.len() > 1 {
+                group.sort_unstable();
+            }
+        }
+        let mut used = vec![false; end.len()];
+        for first in 0..end.len() {
             if used[first] {
                 continue;
             }
             used[first] = true;
-            let start = outgoing[first].0;
-            let mut boundary = vec![start];
-            let mut next = outgoing[first].1;
-            while next != start {
+            let begin = start.partition_point(|&s| s as usize <= first) as u32 - 1;
+            let mut boundary = vec![begin];
+            let mut next = end[first];
+            while next != begin {
                 boundary.push(next);
-                let from = outgoing.partition_point(|&(a, _)| a < next);
-                let Some(offset) = (from..outgoing.len()).take_while(|&i| outgoing[i].0 == next).find(|&i| !used[i])
-                else {
+                let group = start[next as usize] as usize..start[next as usize + 1] as usize;
+                let Some(offset) = group.into_iter().find(|&i| !used[i]) else {
                     break; // an open chain (only at non-manifold boundary vertices)
                 };
                 used[offset] = true;
-                next = outgoing[offset].1;
+                next = end[offset];
             }
             loops.push(boundary);
         }
