@@ -681,6 +681,24 @@ SoftshellStatus softshell_body_apply_impulse(struct SoftshellBody *body,
 // `body` must be NULL or a live body.
 SoftshellStatus softshell_body_break_edge(struct SoftshellBody *body, uint32_t a, uint32_t b);
 
+// Breaks the springs between `pair_count` vertex pairs by hand in one topology change (a cut
+// along several edges: a slit, a knife's path): `pairs` holds `2 * pair_count` vertex indices,
+// pair k being `pairs[2k]`, `pairs[2k + 1]`. Each pair as in `softshell_body_break_edge`; a pair
+// given twice (either way round) counts once. The surface opens once where the whole cut
+// passes, and the generation is bumped once (not at all for `pair_count` 0, where `pairs` may
+// be NULL). Every pair is checked first: `SOFTSHELL_STATUS_INVALID_ARGUMENT`, with nothing
+// changed and the pair named in the message, if any pair would be refused by
+// `softshell_body_break_edge`. `*out_broken`, when not NULL, gets the springs broken (it is
+// not written when the call fails).
+//
+// # Safety
+// `body` must be NULL or a live body; `pairs` NULL or `2 * pair_count` readable indices;
+// `out_broken` NULL or writable.
+SoftshellStatus softshell_body_break_edges(struct SoftshellBody *body,
+                                           const uint32_t *pairs,
+                                           size_t pair_count,
+                                           size_t *out_broken);
+
 // Advances the body by one `time_step`: forces, integration (substeps), obstacles, gas leak,
 // then fracture (springs over `break_strain` crack, nodes over `break_force` release core
 // blocks). Writes what happened into `*out_stats` when it is not NULL.
@@ -696,7 +714,7 @@ SoftshellStatus softshell_body_step(struct SoftshellBody *body,
                                     struct SoftshellBodyStats *out_stats);
 
 // Topology generation: 0 at creation, bumped by every topology change (a crack, a core block,
-// `softshell_body_break_edge`). When it changes, re-query vertex and triangle counts and
+// `softshell_body_break_edge`, `softshell_body_break_edges`). When it changes, re-query vertex and triangle counts and
 // buffer sizes. 0 for NULL.
 //
 // # Safety

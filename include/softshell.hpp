@@ -288,6 +288,14 @@ class Body {
   }
   /// Cuts the spring a-b by hand (bumps the topology generation).
   void break_edge(std::uint32_t a, std::uint32_t b) { check(softshell_body_break_edge(get(), a, b)); }
+  /// Cuts the springs of all `pairs` (vertex a, vertex b) by hand in one topology change, all or
+  /// none (a refused pair throws and changes nothing); returns the springs broken.
+  std::size_t break_edges(const std::vector<std::array<std::uint32_t, 2>> &pairs) {
+    static_assert(sizeof(std::array<std::uint32_t, 2>) == 2 * sizeof(std::uint32_t), "pairs are read as one array");
+    std::size_t broken = 0;
+    check(softshell_body_break_edges(get(), pairs.empty() ? nullptr : pairs.front().data(), pairs.size(), &broken));
+    return broken;
+  }
 
   SoftshellBodyStats step() {
     SoftshellBodyStats stats;

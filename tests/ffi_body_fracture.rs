@@ -737,3 +737,121 @@ fn border_springs_over_the_limit_break_nothing() {
     println!("the corner's springs stretched by up to {most:.2}");
     assert!(most > 2.0 * 0.2, "the corner was not pulled hard enough: strain {most}");
 }
+
+/// `softshell_body_break_edges` cuts several edges in one topology change: a slit of two edges
+/// through a vertex, cut at once, opens the surface once (one new generation, the vertex split)
+/// and leaves the body exactly as the same two edges cut one by one (two generations); a pair
+/// given twice, either way round, counts once; then the opened slit steps on with every
+/// invariant.
+#[test]
+fn a_cut_along_several_edges_is_one_change_alike_to_cutting_them_one_by_one() {
+    let (positions, triangles) = icosphere(3, 1.0);
+    let mut def = over_inflated_ball();
+    def.gas_amount = 300.0;
+    let make = || {
+        let b = body(&positions, &triangles, &def);
+        for _ in 0..5 {
+            step(&b);
+        }
+        b
+    };
+    let (batch, single, repeated) = (make(), make(), make());
+    let before = snapshot(&batch);
+    let around = ring(&before, 0);
+    let slit = [around[0], 0, 0, around[around.len() / 2]];
+    let mut broken = usize::MAX;
+    // SAFETY: live body; two pairs of indices; a writable count.
+    let status = unsafe { softshell_body_break_edges(batch.0, slit.as_ptr(), 2, &mut broken) };
+    assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+    assert_eq!(broken, 2);
+    let cut = snapshot(&batch);
+    assert_eq!(cut.generation, before.generation + 1, "one change for the whole cut");
+    assert_eq!(cut.vertex_count(), before.vertex_count() + 1, "the slit's vertex splits in two");
+    check_surface(&cut, positions.len() / 3);
+    new_vertices_coincide(&cut, before.vertex_count());
+    conserved(before.total_mass(), before.momentum(), &cut, "the cut");
+    old_sizes_are_refused(&batch, &before);
+    for pair in slit.chunks_exact(2) {
+        // SAFETY: live body.
+        assert_eq!(unsafe { softshell_body_break_edge(single.0, pair[0], pair[1]) }, SoftshellStatus::Ok);
+    }
+    let one_by_one = snapshot(&single);
+    assert_eq!(one_by_one.generation, before.generation + 2);
+    // The same pairs again, reversed and repeated: the same two springs.
+    let twice = [around[0], 0, 0, around[0], around[around.len() / 2], 0, 0, around[around.len() / 2]];
+    // SAFETY: live body; four pairs.
+    let status = unsafe { softshell_body_break_edges(repeated.0, twice.as_ptr(), 4, &mut broken) };
+    assert_eq!((status, broken), (SoftshellStatus::Ok, 2), "{}", last_error());
+    for other in [&one_by_one, &snapshot(&repeated)] {
+        assert_eq!(other.triangles, cut.triangles);
+        assert_eq!(other.positions, cut.positions);
+        assert_eq!(other.velocities, cut.velocities);
+        assert_eq!(other.masses, cut.masses);
+        assert_eq!(other.origins, cut.origins);
+    }
+    for b in [&batch, &single] {
+        for _ in 0..10 {
+            step(b);
+        }
+    }
+    let (a, b) = (snapshot(&batch), snapshot(&single));
+    assert_eq!((a.positions, a.triangles), (b.positions, b.triangles), "the two bodies must move alike");
+}
+
+/// A cut whose pairs are checked first: one refused pair (not an edge, an edge of one face, an
+/// index out of range) refuses the whole cut with a message naming it, and nothing changes;
+/// NULL pairs with a count are refused, no pairs change nothing.
+#[test]
+fn a_cut_with_a_refused_pair_changes_nothing() {
+    let (positions, triangles) = cloth(4, 1.0);
+    let mut def = softshell_body_def_default();
+    def.gas_amount = 0.0;
+    let b = body(&positions, &triangles, &def);
+    let before = snapshot(&b);
+    let faces_of = |(x, y): (u32, u32)| triangles.chunks_exact(3).filter(|t| t.contains(&x) && t.contains(&y)).count();
+    let all = edges(&triangles);
+    let inner: Vec<(u32, u32)> = all.iter().copied().filter(|&e| faces_of(e) == 2).collect();
+    let border = all.iter().copied().find(|&e| faces_of(e) == 1).unwrap();
+    let (x, y) = (inner[0], inner[1]);
+    let far =
+        (0..before.vertex_count() as u32).find(|&v| v != x.0 && !all.contains(&(x.0.min(v), x.0.max(v)))).unwrap();
+    let n = before.vertex_count() as u32;
+    for (bad, what) in [
+        ([x.0, far], "not joined by a spring"),
+        ([border.0, border.1], "one face"),
+        ([x.0, n + 3], "out of range"),
+        ([x.0, x.0], "not joined by a spring"),
+    ] {
+        let pairs = [x.0, x.1, bad[0], bad[1], y.0, y.1];
+        let mut broken = 7usize;
+        // SAFETY: live body; three pairs.
+        let status = unsafe { softshell_body_break_edges(b.0, pairs.as_ptr(), 3, &mut broken) };
+        assert_eq!(status, SoftshellStatus::InvalidArgument, "{what}");
+        let message = last_error();
+        assert!(message.contains(what) && message.contains("pair 1"), "{what}: {message}");
+        assert_eq!(broken, 7, "a refused cut wrote its count");
+        let after = snapshot(&b);
+        assert_eq!(
+            (after.generation, &after.triangles, &after.positions),
+            (before.generation, &before.triangles, &before.positions)
+        );
+    }
+    // SAFETY: live body; NULL with a count, then NULL with none.
+    unsafe {
+        assert_eq!(
+            softshell_body_break_edges(b.0, std::ptr::null(), 2, std::ptr::null_mut()),
+            SoftshellStatus::NullArgument
+        );
+        let mut broken = 7usize;
+        assert_eq!(softshell_body_break_edges(b.0, std::ptr::null(), 0, &mut broken), SoftshellStatus::Ok);
+        assert_eq!(broken, 0);
+    }
+    assert_eq!(snapshot(&b).generation, before.generation, "no pairs, no change");
+    // The good pairs alone pass.
+    let pairs = [x.0, x.1, y.0, y.1];
+    // SAFETY: live body; two pairs; the count is not wanted.
+    let status = unsafe { softshell_body_break_edges(b.0, pairs.as_ptr(), 2, std::ptr::null_mut()) };
+    assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+    assert_eq!(snapshot(&b).generation, before.generation + 1);
+    step(&b);
+}

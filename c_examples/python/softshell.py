@@ -348,6 +348,7 @@ _SIGNATURES = {
     "softshell_body_pin_vertex": (_Status, [_h, ctypes.c_uint32]),
     "softshell_body_apply_impulse": (_Status, [_h, ctypes.c_uint32, _pf]),
     "softshell_body_break_edge": (_Status, [_h, ctypes.c_uint32, ctypes.c_uint32]),
+    "softshell_body_break_edges": (_Status, [_h, _pu32, ctypes.c_size_t, _psize]),
     "softshell_body_step": (_Status, [_h, ctypes.POINTER(BodyStats)]),
     "softshell_body_topology_generation": (ctypes.c_uint64, [_h]),
     "softshell_body_vertex_count": (ctypes.c_size_t, [_h]),
@@ -716,6 +717,14 @@ class Body(_Handle):
     def break_edge(self, a, b):
         _check(C.body_break_edge(self.handle, a, b))
 
+    def break_edges(self, pairs):
+        """Breaks the edges of `pairs` (vertex pairs, shape (k, 2)) in one topology change, all or
+        none: if a pair is refused, nothing changes. Returns the springs broken."""
+        pairs = np.ascontiguousarray(np.asarray(pairs, dtype=np.uint32).reshape(-1, 2))
+        broken = ctypes.c_size_t(0)
+        _check(C.body_break_edges(self.handle, pairs.ctypes.data_as(_pu32), len(pairs), ctypes.byref(broken)))
+        return broken.value
+
     def cut_slit(self, vertex):
         """A pin prick: breaks the two edges from `vertex` to opposite sides of its ring of
         neighbours, a straight slit through it (a crack runs from a slit that opens; a cut that
@@ -736,8 +745,7 @@ class Body(_Handle):
         if len(ring) != len(faces) or after.get(ring[-1]) != ring[0]:
             raise ValueError(f"vertex {vertex} has no closed ring of faces around it")
         ends = (ring[0], ring[len(ring) // 2])
-        for end in ends:
-            self.break_edge(end, vertex)
+        self.break_edges([(end, vertex) for end in ends])  # one change: both or neither
         return ends
 
     def step(self):

@@ -232,6 +232,21 @@ class Buffers(unittest.TestCase):
         self.assertIn("one face", str(caught.exception))
         body.step()
 
+    def test_a_cut_of_several_edges_is_all_or_nothing(self):
+        sphere = softshell.Mesh.load_obj(os.path.join(ROOT, "data", "sphere.obj"))
+        body = softshell.Body(sphere, gas_amount=10.0)
+        t = body.triangles()
+        good = [(int(t[0, 0]), int(t[0, 1])), (int(t[0, 1]), int(t[0, 2]))]
+        with self.assertRaises(softshell.Error) as caught:
+            body.break_edges(good + [(int(t[0, 0]), int(t[0, 0]))])
+        self.assertIn("pair 2", str(caught.exception))
+        self.assertEqual(body.topology_generation, 0)
+        self.assertEqual(body.break_edges(good + [good[0][::-1]]), 2)
+        self.assertEqual(body.topology_generation, 1, "one change for the whole cut")
+        self.assertEqual(body.break_edges([]), 0)
+        self.assertEqual(body.topology_generation, 1)
+        body.step()
+
     def test_frames_are_written(self):
         sphere = softshell.Mesh.load_obj(os.path.join(ROOT, "data", "sphere.obj"))
         shell = softshell.Shell(sphere)

@@ -6,7 +6,8 @@ use glam::Vec3;
 /// The springs of a body: end vertices and rest lengths, one entry per unbroken mesh edge.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Springs {
-    /// End vertices `[i, j]`, i < j (the implicit integrator's assembly relies on it).
+    /// End vertices `[i, j]`, i < j (the implicit integrator's assembly relies on it), sorted:
+    /// the edges' order without the broken ones (`Body::break_edges` searches them).
     pub ends: Vec<[u32; 2]>,
     /// Rest length L0, m.
     pub rest: Vec<f32>,

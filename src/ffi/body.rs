@@ -5,8 +5,8 @@
 use glam::Vec3;
 
 use super::boundary::{
-    Poisonable, SoftshellStatus, arg_kind, arg_ref, arg_vec3, check_cookie, check_range, handle_call, handle_read,
-    out_arg, status_call, value_call,
+    Poisonable, SoftshellStatus, arg_kind, arg_ref, arg_slice, arg_vec3, check_cookie, check_range, handle_call,
+    handle_read, out_arg, status_call, value_call,
 };
 #[cfg(feature = "body")]
 use super::boundary::{copy_out, write_out, write_triples};
@@ -565,6 +565,52 @@ pub unsafe extern "C" fn softshell_body_break_edge(body: *mut SoftshellBody, a: 
     })
 }
 
+/// Breaks the springs between `pair_count` vertex pairs by hand in one topology change (a cut
+/// along several edges: a slit, a knife's path): `pairs` holds `2 * pair_count` vertex indices,
+/// pair k being `pairs[2k]`, `pairs[2k + 1]`. Each pair as in `softshell_body_break_edge`; a pair
+/// given twice (either way round) counts once. The surface opens once where the whole cut
+/// passes, and the generation is bumped once (not at all for `pair_count` 0, where `pairs` may
+/// be NULL). Every pair is checked first: `SOFTSHELL_STATUS_INVALID_ARGUMENT`, with nothing
+/// changed and the pair named in the message, if any pair would be refused by
+/// `softshell_body_break_edge`. `*out_broken`, when not NULL, gets the springs broken (it is
+/// not written when the call fails).
+///
+/// # Safety
+/// `body` must be NULL or a live body; `pairs` NULL or `2 * pair_count` readable indices;
+/// `out_broken` NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn softshell_body_break_edges(
+    body: *mut SoftshellBody,
+    pairs: *const u32,
+    pair_count: usize,
+    out_broken: *mut usize,
+) -> SoftshellStatus {
+    handle_call("softshell_body_break_edges", body, "body", |h| {
+        let indices = pair_count
+            .checked_mul(2)
+            .ok_or_else(|| Error::invalid_argument(format!("`pair_count` = {pair_count} is too large")))?;
+        // SAFETY: the caller promises 2 * pair_count indices or NULL.
+        let indices = unsafe { arg_slice(pairs, indices, "pairs")? };
+        // Checked before anything changes (NULL is allowed: not written).
+        let out_broken = if out_broken.is_null() { None } else { Some(out_arg(out_broken, "out_broken")?) };
+        #[cfg(feature = "body")]
+        {
+            let pairs: Vec<[u32; 2]> = indices.chunks_exact(2).map(|p| [p[0], p[1]]).collect();
+            let broken = h.body.break_edges(&pairs)?;
+            if let Some(out) = out_broken {
+                // SAFETY: checked by out_arg; the caller promises a writable size_t.
+                unsafe { write_out(out, broken as usize) };
+            }
+            Ok(())
+        }
+        #[cfg(not(feature = "body"))]
+        {
+            let _ = (h, indices, out_broken);
+            Err(unsupported())
+        }
+    })
+}
+
 /// Advances the body by one `time_step`: forces, integration (substeps), obstacles, gas leak,
 /// then fracture (springs over `break_strain` crack, nodes over `break_force` release core
 /// blocks). Writes what happened into `*out_stats` when it is not NULL.
@@ -628,7 +674,7 @@ fn read_body<T>(body: *const SoftshellBody, fallback: T, f: impl FnOnce(&Body) -
 }
 
 /// Topology generation: 0 at creation, bumped by every topology change (a crack, a core block,
-/// `softshell_body_break_edge`). When it changes, re-query vertex and triangle counts and
+/// `softshell_body_break_edge`, `softshell_body_break_edges`). When it changes, re-query vertex and triangle counts and
 /// buffer sizes. 0 for NULL.
 ///
 /// # Safety
