@@ -674,16 +674,27 @@ fn faces_keep_their_shape_after_a_fracture_storm() {
     }
 }
 
-/// A cut parts two faces: an edge of one face (a cloth's border, a side of an open crack) is
-/// refused with INVALID_ARGUMENT and a message, and nothing changes (generation, counts).
-#[test]
-fn a_cut_along_a_border_is_refused_and_changes_nothing() {
+/// A 4 x 4 cloth without gas (its triangles, its body).
+fn gasless_cloth() -> (Vec<u32>, Body) {
     let (positions, triangles) = cloth(4, 1.0);
     let mut def = softshell_body_def_default();
     def.gas_amount = 0.0;
     let b = body(&positions, &triangles, &def);
+    (triangles, b)
+}
+
+/// The faces of `triangles` that have the edge `(x, y)`.
+fn faces_of_edge(triangles: &[u32], (x, y): (u32, u32)) -> usize {
+    triangles.chunks_exact(3).filter(|t| t.contains(&x) && t.contains(&y)).count()
+}
+
+/// A cut parts two faces: an edge of one face (a cloth's border, a side of an open crack) is
+/// refused with INVALID_ARGUMENT and a message, and nothing changes (generation, counts).
+#[test]
+fn a_cut_along_a_border_is_refused_and_changes_nothing() {
+    let (triangles, b) = gasless_cloth();
     let before = snapshot(&b);
-    let faces_of = |(x, y): (u32, u32)| triangles.chunks_exact(3).filter(|t| t.contains(&x) && t.contains(&y)).count();
+    let faces_of = |edge| faces_of_edge(&triangles, edge);
     let border = edges(&triangles).into_iter().find(|&e| faces_of(e) == 1);
     let (x, y) = border.expect("a cloth has border edges");
     // SAFETY: live body.
@@ -803,12 +814,9 @@ fn a_cut_along_several_edges_is_one_change_alike_to_cutting_them_one_by_one() {
 /// NULL pairs with a count are refused, no pairs change nothing.
 #[test]
 fn a_cut_with_a_refused_pair_changes_nothing() {
-    let (positions, triangles) = cloth(4, 1.0);
-    let mut def = softshell_body_def_default();
-    def.gas_amount = 0.0;
-    let b = body(&positions, &triangles, &def);
+    let (triangles, b) = gasless_cloth();
     let before = snapshot(&b);
-    let faces_of = |(x, y): (u32, u32)| triangles.chunks_exact(3).filter(|t| t.contains(&x) && t.contains(&y)).count();
+    let faces_of = |edge| faces_of_edge(&triangles, edge);
     let all = edges(&triangles);
     let inner: Vec<(u32, u32)> = all.iter().copied().filter(|&e| faces_of(e) == 2).collect();
     let border = all.iter().copied().find(|&e| faces_of(e) == 1).unwrap();
