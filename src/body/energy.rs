@@ -206,8 +206,8 @@ impl SpringEnergyLanes {
 pub(crate) const VERTEX_CHUNK: usize = 4096;
 
 /// The gas of a state for [`state_energies`]: the gas, its fragments' origins
-/// ([`Gas::origins`]), the triangles and their fragments.
-pub(crate) type GasState<'a> = (&'a Gas, &'a [glam::DVec3], &'a [[u32; 3]], &'a [u32]);
+/// ([`Gas::origins`]) and the triangles.
+pub(crate) type GasState<'a> = (&'a Gas, &'a [glam::DVec3], &'a [[u32; 3]]);
 
 /// The energies of a state in one parallel pass (one fork for all of them): kinetic, spring and
 /// gravitational energy (J), the largest spring strain, and the face chunks' parts of each gas
@@ -228,7 +228,7 @@ pub(crate) fn state_energies(
     }
     let mut parts: Vec<Part> = (0..x.len().div_ceil(VERTEX_CHUNK)).map(|c| Part::Vertices(c, 0.0, 0.0)).collect();
     parts.extend((0..springs.len().div_ceil(SPRING_CHUNK)).map(|c| Part::Springs(c, 0.0, 0.0)));
-    if let Some((gas, _, triangles, _)) = gas {
+    if let Some((gas, _, triangles)) = gas {
         parts
             .extend((0..triangles.len().div_ceil(FACE_CHUNK)).map(|c| Part::Faces(c, vec![0.0; gas.fragment_count()])));
     }
@@ -240,8 +240,8 @@ pub(crate) fn state_energies(
             *gravity_energy = gravity(&mass[range.clone()], &x[range], g);
         }
         Part::Faces(c, six_v) => {
-            if let Some((gas, origin, triangles, face_fragment)) = gas {
-                gas.face_chunk_volumes(x, origin, triangles, face_fragment, *c, six_v);
+            if let Some((gas, origin, triangles)) = gas {
+                gas.face_chunk_volumes(x, origin, triangles, *c, six_v);
             }
         }
     });

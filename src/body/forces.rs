@@ -12,7 +12,6 @@ use super::wind::{DragState, add_wind};
 pub(crate) struct Model<'a> {
     pub settings: &'a BodySettings,
     pub triangles: &'a [[u32; 3]],
-    pub face_fragment: &'a [u32],
     pub springs: &'a Springs,
     pub mass: &'a [f32],
     pub inv_mass: &'a [f32],
@@ -54,7 +53,7 @@ pub(crate) fn add_spring_forces(model: &Model, x: &[Vec3], v: &[Vec3], f: &mut [
 /// Gas pressure forces `P_f ∂V_f/∂x_i` added to `f` (SPEC 2.1 eq. 8-9); measures the gas at `x`
 /// and leaves `∂V/∂x` in `gradient`.
 pub(crate) fn add_gas_forces(model: &Model, gas: &mut Gas, x: &[Vec3], gradient: &mut [Vec3], f: &mut [Vec3]) {
-    gas.measure_with_gradient(x, model.triangles, model.face_fragment, gradient);
+    gas.measure_with_gradient(x, model.triangles, gradient);
     for (i, g) in gradient.iter().enumerate() {
         let frag = gas.vertex_fragment[i];
         if frag != u32::MAX {
@@ -72,7 +71,7 @@ pub(crate) fn add_gas_forces_parallel(
     gradient: &mut [Vec3],
     f: &mut [Vec3],
 ) {
-    gas.measure_with_gradient_parallel(pool, x, model.triangles, model.face_fragment, gradient);
+    gas.measure_with_gradient_parallel(pool, x, model.triangles, gradient);
     for (i, g) in gradient.iter().enumerate() {
         let frag = gas.vertex_fragment[i];
         if frag != u32::MAX {

@@ -28,6 +28,10 @@ pub(crate) struct Gas {
     pub v_min: Vec<f64>,
     /// Caps over the boundary loops.
     pub caps: Vec<Cap>,
+    /// The gas fragment of each face: the body's fragments (its connected pieces) that hold
+    /// gas, then one more for all the faces of pieces without gas, when there are such (see
+    /// [`Gas::inherit`]).
+    pub face_fragment: Vec<u32>,
     /// Fragment of each vertex (`u32::MAX` for a vertex used by no face).
     pub vertex_fragment: Vec<u32>,
     /// Per slice of eight vertices, their `vertex_fragment` when they share it (`u32::MAX`: none
@@ -385,6 +389,7 @@ impl Gas {
             n_rt: vec![0.0; fragment_count],
             v_min: vec![0.0; fragment_count],
             caps,
+            face_fragment: face_fragment.to_vec(),
             slice_vertex_fragment: slice_fragments(&vertex_fragment),
             vertex_fragment,
             reference_vertex,
@@ -414,9 +419,10 @@ impl Gas {
 
     /// SPEC 2.1/2.4: capped volume and hole area of every fragment, then the pressure
     /// `P = nRT / max(V, v_min)` (SPEC 2.2 clamp; `clamped` reports it).
-    pub fn measure(&mut self, x: &[Vec3], triangles: &[[u32; 3]], face_fragment: &[u32]) {
+    pub fn measure(&mut self, x: &[Vec3], triangles: &[[u32; 3]]) {
         let origin = self.origins(x);
         let mut six_v = vec![0.0f64; self.fragment_count()];
+        let face_fragment = &self.face_fragment;
         // (Eight faces at a time with AVX2: a topology change measures its new fragments here,
         // about 0.2 ms one face at a time on the issue-5 balloon's first cracking step.)
         add_face_tets(x, &origin, triangles, face_fragment, &mut six_v);
@@ -425,17 +431,11 @@ impl Gas {
 
     /// [`Gas::measure`] and [`Gas::volume_gradient`] in one pass over the faces (the cross
     /// products of the volume are the gradient): what each force evaluation needs.
-    pub fn measure_with_gradient(
-        &mut self,
-        x: &[Vec3],
-        triangles: &[[u32; 3]],
-        face_fragment: &[u32],
-        out: &mut [Vec3],
-    ) {
+    pub fn measure_with_gradient(&mut self, x: &[Vec3], triangles: &[[u32; 3]], out: &mut [Vec3]) {
         out.iter_mut().for_each(|g| *g = Vec3::ZERO);
         let origin = self.origins(x);
         let mut six_v = vec![0.0f64; self.fragment_count()];
-        for (t, &frag) in triangles.iter().zip(face_fragment) {
+        for (t, &frag) in triangles.iter().zip(&self.face_fragment) {
             let o = origin[frag as usize];
             // Spelled out rather than `t.map(..)`: the array map was once left as a call that
             // went through the stack and doubled the cost of this loop (XPBD, explicit).
@@ -455,12 +455,12 @@ impl Gas {
 
     /// [`Gas::measure`] in parallel fixed chunks of faces (the volumes differ in rounding only).
     #[cfg(test)]
-    pub fn measure_parallel(&mut self, pool: &WorkerPool, x: &[Vec3], triangles: &[[u32; 3]], face_fragment: &[u32]) {
+    pub fn measure_parallel(&mut self, pool: &WorkerPool, x: &[Vec3], triangles: &[[u32; 3]]) {
         let origin = self.origins(x);
         let fragments = self.fragment_count();
         let parts = pool.map_collect(triangles.len().div_ceil(FACE_CHUNK), |c| {
             let mut six_v = vec![0.0f64; fragments];
-            self.face_chunk_volumes(x, &origin, triangles, face_fragment, c, &mut six_v);
+            self.face_chunk_volumes(x, &origin, triangles, c, &mut six_v);
             six_v
         });
         self.finish_face_chunks(x, &origin, &parts);
@@ -474,13 +474,12 @@ impl Gas {
         x: &[Vec3],
         origin: &[DVec3],
         triangles: &[[u32; 3]],
-        face_fragment: &[u32],
         c: usize,
         six_v: &mut [f64],
     ) {
         let range = c * FACE_CHUNK..((c + 1) * FACE_CHUNK).min(triangles.len());
         six_v.fill(0.0);
-        add_face_tets(x, origin, &triangles[range.clone()], &face_fragment[range], six_v);
+        add_face_tets(x, origin, &triangles[range.clone()], &self.face_fragment[range], six_v);
     }
 
     /// Volumes, hole areas and pressures from the face chunks' parts (in chunk order).
@@ -503,11 +502,10 @@ impl Gas {
         pool: &WorkerPool,
         x: &[Vec3],
         triangles: &[[u32; 3]],
-        face_fragment: &[u32],
         out: &mut [Vec3],
     ) {
         let n = out.len();
-        let origin = self.prepare_gradient(x, triangles, face_fragment, n);
+        let origin = self.prepare_gradient(x, triangles, n);
         let fragments = self.fragment_count().max(1);
         let face_chunks = triangles.len().div_ceil(FACE_CHUNK);
         let mut chunk_six_v = std::mem::take(&mut self.chunk_six_v);
@@ -517,9 +515,7 @@ impl Gas {
         let mut rows: Vec<(usize, &mut [Vec3])> = out.chunks_mut(VERTEX_CHUNK).enumerate().collect();
         pool.for_each_task(&mut rows, |(c, out)| this.gradient_rows(x, &origin, *c * VERTEX_CHUNK, out));
         let mut faces: Vec<(usize, &mut [f64])> = chunk_six_v.chunks_mut(fragments).enumerate().collect();
-        pool.for_each_task(&mut faces, |(c, six_v)| {
-            this.face_chunk_volumes(x, &origin, triangles, face_fragment, *c, six_v)
-        });
+        pool.for_each_task(&mut faces, |(c, six_v)| this.face_chunk_volumes(x, &origin, triangles, *c, six_v));
         self.finish_gradient(x, &origin, &chunk_six_v, out);
         self.chunk_six_v = chunk_six_v;
     }
@@ -527,14 +523,8 @@ impl Gas {
     /// The start of the parallel gathering ([`Gas::gradient_rows`] on every chunk of vertices,
     /// then [`Gas::finish_gradient`]): makes the corner lists on the first call after a topology
     /// change (see [`Gas::prepare_corners`]); returns the fragments' origins.
-    pub fn prepare_gradient(
-        &mut self,
-        x: &[Vec3],
-        triangles: &[[u32; 3]],
-        face_fragment: &[u32],
-        n: usize,
-    ) -> Vec<DVec3> {
-        self.prepare_corners(triangles, face_fragment, n);
+    pub fn prepare_gradient(&mut self, x: &[Vec3], triangles: &[[u32; 3]], n: usize) -> Vec<DVec3> {
+        self.prepare_corners(triangles, n);
         self.origins(x)
     }
 
@@ -549,9 +539,9 @@ impl Gas {
     /// body stepped by it makes them before its first step (on the issue-5 balloon, 10,242
     /// vertices, about 1 ms that the first step took on top of its own work); after a topology
     /// change the next step does (the cracking step does not wait for them).
-    pub fn prepare_corners(&mut self, triangles: &[[u32; 3]], face_fragment: &[u32], n: usize) {
+    pub fn prepare_corners(&mut self, triangles: &[[u32; 3]], n: usize) {
         if self.corner_offsets.len() != n + 1 {
-            self.build_corners(triangles, face_fragment, n);
+            self.build_corners(triangles, n);
         }
     }
 
@@ -655,8 +645,9 @@ impl Gas {
     }
 
     /// The corners at each vertex (CSR, faces ascending).
-    fn build_corners(&mut self, triangles: &[[u32; 3]], face_fragment: &[u32], n: usize) {
+    fn build_corners(&mut self, triangles: &[[u32; 3]], n: usize) {
         let (offsets, corners) = crate::mesh::vertex_incidence(n, triangles, |face, c| 3 * face as u32 + c as u32);
+        let face_fragment = &self.face_fragment;
         self.corner_offsets = offsets;
         self.corners = corners
             .iter()
@@ -757,7 +748,8 @@ impl Gas {
     /// fragments without gas). Exact for the capped volume (SPEC 2.1: `= (1/3) Σ A_f n_f` on a
     /// closed mesh).
     #[cfg(test)]
-    pub fn volume_gradient(&self, x: &[Vec3], triangles: &[[u32; 3]], face_fragment: &[u32], out: &mut [Vec3]) {
+    pub fn volume_gradient(&self, x: &[Vec3], triangles: &[[u32; 3]], out: &mut [Vec3]) {
+        let face_fragment = &self.face_fragment;
         out.iter_mut().for_each(|g| *g = Vec3::ZERO);
         let origin = |f: usize| {
             let v = self.reference_vertex[f];
@@ -833,25 +825,18 @@ impl Gas {
         }
     }
 
-    /// Hands the gas of the fragments before a topology change to those after it: each new
-    /// fragment's parent is the old fragment of its first surviving face, and a parent's nRT is
-    /// split between its children in proportion to their (capped) volumes, so the pressure does
-    /// not jump. Shreds, children with less than [`SHRED_FRACTION`] of their parent's volume before
-    /// the change, get
-    /// no gas: it escapes through the burst (a gas in a near-zero volume would be arbitrarily
-    /// stiff, `∂P/∂V = -P/V`).
-    pub fn inherit(
-        &mut self,
-        old_n_rt: &[f64],
-        old_volume: &[f64],
-        old_face_fragment: &[u32],
-        new_face_fragment: &[u32],
-        x: &[Vec3],
-        triangles: &[[u32; 3]],
-    ) {
+    /// Hands the gas of `old` (the gas before a topology change) to this one, made for the
+    /// fragments after it: each new fragment's parent is the old gas fragment of its first
+    /// surviving face, and a parent's nRT is split between its children in proportion to their
+    /// (capped) volumes, so the pressure does not jump. Shreds, children with less than
+    /// [`SHRED_FRACTION`] of their parent's volume before the change, get no gas: it escapes
+    /// through the burst (a gas in a near-zero volume would be arbitrarily stiff,
+    /// `∂P/∂V = -P/V`). Then the fragments without gas are dropped ([`Gas::keep_fragments_with_gas`]).
+    pub fn inherit(&mut self, old: &Gas, x: &[Vec3], triangles: &[[u32; 3]]) {
+        let (old_n_rt, old_volume, old_face_fragment) = (&old.n_rt, &old.volume, &old.face_fragment);
         let n = self.fragment_count();
         let mut parent = vec![u32::MAX; n];
-        for (face, &frag) in new_face_fragment.iter().enumerate() {
+        for (face, &frag) in self.face_fragment.iter().enumerate() {
             if parent[frag as usize] == u32::MAX && face < old_face_fragment.len() {
                 parent[frag as usize] = old_face_fragment[face];
             }
@@ -859,7 +844,7 @@ impl Gas {
         // Volumes of the new fragments with a unit gas so that measure() fills them.
         self.n_rt.iter_mut().for_each(|g| *g = 1.0);
         self.v_min.iter_mut().for_each(|v| *v = 0.0);
-        self.measure(x, triangles, new_face_fragment);
+        self.measure(x, triangles);
         let mut total = vec![0.0f64; old_n_rt.len()];
         for f in 0..n {
             if parent[f] != u32::MAX {
@@ -880,7 +865,7 @@ impl Gas {
         }
         for f in 0..n {
             let (gas, volume) = match parent[f] {
-                p if p != u32::MAX && total[p as usize] > 0.0 => {
+                p if p != u32::MAX && total[p as usize] > 0.0 && old_n_rt[p as usize] > 0.0 => {
                     let v = self.volume[f].max(0.0);
                     (old_n_rt[p as usize] * v / total[p as usize], v)
                 }
@@ -892,6 +877,44 @@ impl Gas {
         // pressures follow the new nRT (a second measurement was a pass over every face, about
         // 0.07 ms of the issue-5 balloon's first cracking step).
         self.refresh_pressures();
+        self.keep_fragments_with_gas(triangles);
+    }
+
+    /// Keeps the fragments that hold gas, numbered in their order, and gathers all the others
+    /// (pieces whose gas escaped: shreds, pieces of a burst) into one more fragment without gas
+    /// and without caps. A burst leaves thousands of pieces and a few with gas (the issue-5
+    /// balloon at 3% strain: 15,000 pieces 60 steps after its first crack, 100-160 with gas):
+    /// kept as fragments, every pass of a step summed, reset and looked up per fragment, and
+    /// slices of eight vertices mixed their fragments: its steps 60-99 took 58-65 ms on one
+    /// thread and 46-47 ms on two, now 34-39 and 30-32 ms, the same steps to the bit (broken
+    /// springs, vertices, pieces and CG iterations of every cracking step alike). Nothing
+    /// changes when every fragment holds gas.
+    fn keep_fragments_with_gas(&mut self, triangles: &[[u32; 3]]) {
+        let n = self.fragment_count();
+        let holders: Vec<usize> = (0..n).filter(|&f| self.n_rt[f] > 0.0).collect();
+        if holders.len() == n {
+            return;
+        }
+        let without = holders.len() as u32;
+        let mut kept = vec![without; n];
+        for (k, &f) in holders.iter().enumerate() {
+            kept[f] = k as u32;
+        }
+        let face_fragment: Vec<u32> = self.face_fragment.iter().map(|&f| kept[f as usize]).collect();
+        let mut gas = Gas::new(self.vertex_fragment.len(), triangles, &face_fragment, holders.len() + 1, &[]);
+        gas.caps = std::mem::take(&mut self.caps)
+            .into_iter()
+            .filter(|cap| kept[cap.fragment as usize] != without)
+            .map(|cap| Cap { fragment: kept[cap.fragment as usize], ring: cap.ring })
+            .collect();
+        for (k, &f) in holders.iter().enumerate() {
+            gas.n_rt[k] = self.n_rt[f];
+            gas.v_min[k] = self.v_min[f];
+            gas.volume[k] = self.volume[f];
+            gas.open_area[k] = self.open_area[f];
+        }
+        gas.refresh_pressures();
+        *self = gas;
     }
 
     pub fn memory_bytes(&self) -> usize {
@@ -901,7 +924,8 @@ impl Gas {
             + self.pressure.capacity()
             + self.open_area.capacity())
             * 8
-            + (self.vertex_fragment.capacity()
+            + (self.face_fragment.capacity()
+                + self.vertex_fragment.capacity()
                 + self.slice_vertex_fragment.capacity()
                 + self.reference_vertex.capacity()
                 + self.corner_offsets.capacity()
@@ -951,7 +975,7 @@ mod tests {
         let n = 7;
         let mut gas = Gas::new(n, &t, &vec![0; t.len()], 1, &[]);
         assert!(!gas.has_corners_for(n));
-        gas.prepare_corners(&t, &vec![0; t.len()], n);
+        gas.prepare_corners(&t, n);
         assert!(gas.has_corners_for(n));
         for v in 0..n as u32 {
             let (mut next, mut prev): (Vec<u32>, Vec<u32>) = t
@@ -974,24 +998,24 @@ mod tests {
         let ff = vec![0; 4];
         let mut gas = Gas::new(4, &t, &ff, 1, &[]);
         gas.assign(0, 1.0, 1.0 / 6.0);
-        gas.measure(&x, &t, &ff);
+        gas.measure(&x, &t);
         assert!((gas.volume[0] - 1.0 / 6.0).abs() < 1e-7);
         let mut g = vec![Vec3::ZERO; 4];
-        gas.volume_gradient(&x, &t, &ff, &mut g);
-        check_gradient(&mut gas, &mut x, &t, &ff, &g);
+        gas.volume_gradient(&x, &t, &mut g);
+        check_gradient(&mut gas, &mut x, &t, &g);
     }
 
-    fn check_gradient(gas: &mut Gas, x: &mut [Vec3], t: &[[u32; 3]], ff: &[u32], g: &[Vec3]) {
+    fn check_gradient(gas: &mut Gas, x: &mut [Vec3], t: &[[u32; 3]], g: &[Vec3]) {
         let h = 1e-3f32;
         for v in 0..x.len() {
             for axis in 0..3 {
                 let keep = x[v];
                 x[v][axis] += h;
-                gas.measure(x, t, ff);
+                gas.measure(x, t);
                 let plus = gas.volume[0];
                 x[v] = keep;
                 x[v][axis] -= h;
-                gas.measure(x, t, ff);
+                gas.measure(x, t);
                 let minus = gas.volume[0];
                 x[v] = keep;
                 let fd = (plus - minus) / (2.0 * h as f64);
@@ -1015,19 +1039,19 @@ mod tests {
         let topo = crate::mesh::Topology::build(&t, 5);
         let mut gas = Gas::new(5, &t, &ff, 1, &topo.boundary_loops);
         gas.assign(0, 2.0, 1.0 / 3.0);
-        gas.measure(&x, &t, &ff);
+        gas.measure(&x, &t);
         assert!((gas.volume[0] - 1.0 / 3.0).abs() < 1e-6, "{}", gas.volume[0]);
         assert!((gas.open_area[0] - 1.0).abs() < 1e-6);
         assert!((gas.pressure[0] - 6.0).abs() < 1e-4);
         x[1].y += 0.1; // make the cap non-planar
         let mut g = vec![Vec3::ZERO; 5];
-        gas.volume_gradient(&x, &t, &ff, &mut g);
-        check_gradient(&mut gas, &mut x, &t, &ff, &g);
+        gas.volume_gradient(&x, &t, &mut g);
+        check_gradient(&mut gas, &mut x, &t, &g);
         // The one-pass form gives the same volume, pressure and gradient.
-        gas.measure(&x, &t, &ff);
+        gas.measure(&x, &t);
         let (volume, pressure, open) = (gas.volume[0], gas.pressure[0], gas.open_area[0]);
         let mut fused = vec![Vec3::ONE; 5];
-        gas.measure_with_gradient(&x, &t, &ff, &mut fused);
+        gas.measure_with_gradient(&x, &t, &mut fused);
         assert!((gas.volume[0] - volume).abs() < 1e-12 && (gas.pressure[0] - pressure).abs() < 1e-9);
         assert_eq!(gas.open_area[0], open);
         for (a, b) in fused.iter().zip(&g) {
@@ -1037,7 +1061,7 @@ mod tests {
         // on closed fans, the apex here; to the bit elsewhere) and for any thread count, the
         // same volume.
         let mut serial = vec![Vec3::ONE; 5];
-        gas.measure_with_gradient_parallel(&WorkerPool::new(1).unwrap(), &x, &t, &ff, &mut serial);
+        gas.measure_with_gradient_parallel(&WorkerPool::new(1).unwrap(), &x, &t, &mut serial);
         assert!(gas.closed_fan[4] && !gas.closed_fan[0]);
         for (v, (a, b)) in serial.iter().zip(&fused).enumerate() {
             assert!((*a - *b).length() <= 1e-6 * b.length(), "vertex {v}: {a} vs {b}");
@@ -1047,10 +1071,10 @@ mod tests {
         }
         for threads in [1, 2] {
             let mut gathered = vec![Vec3::ONE; 5];
-            gas.measure_with_gradient_parallel(&WorkerPool::new(threads).unwrap(), &x, &t, &ff, &mut gathered);
+            gas.measure_with_gradient_parallel(&WorkerPool::new(threads).unwrap(), &x, &t, &mut gathered);
             assert_eq!(gathered, serial);
             assert!((gas.volume[0] - volume).abs() < 1e-12 && gas.open_area[0] == open);
-            gas.measure_parallel(&WorkerPool::new(threads).unwrap(), &x, &t, &ff);
+            gas.measure_parallel(&WorkerPool::new(threads).unwrap(), &x, &t);
             assert!((gas.volume[0] - volume).abs() < 1e-12 && gas.open_area[0] == open);
         }
     }
@@ -1089,12 +1113,12 @@ mod tests {
                 gas.assign(f, n_rt, 1.0);
             }
             let mut gathered = vec![Vec3::ONE; n];
-            gas.measure_with_gradient_parallel(&WorkerPool::new(1).unwrap(), &x, &t, &ff, &mut gathered);
+            gas.measure_with_gradient_parallel(&WorkerPool::new(1).unwrap(), &x, &t, &mut gathered);
             assert_eq!(gas.slice_fragment, [0, u32::MAX, 1, 2]);
             // (The fourth slice's rings reach the last point: one vertex at a time.)
             assert!((0..3).all(|s| gas.rings.is_whole_slice(8 * s)), "the first three slices go eight at a time");
             let mut scattered = vec![Vec3::ZERO; n];
-            gas.volume_gradient(&x, &t, &ff, &mut scattered);
+            gas.volume_gradient(&x, &t, &mut scattered);
             for (v, (a, b)) in gathered.iter().zip(&scattered).enumerate() {
                 assert!((*a - *b).length() <= 1e-5 * (1.0 + b.length()), "{with_gas:?}, vertex {v}: {a} vs {b}");
             }
@@ -1148,7 +1172,7 @@ mod tests {
         let mut gas = Gas::new(4, &t, &ff, 1, &[]);
         gas.assign(0, 1.0, 1.0 / 6.0);
         x[3] = Vec3::new(0.0, 0.0, -0.5); // inverted
-        gas.measure(&x, &t, &ff);
+        gas.measure(&x, &t);
         assert!(gas.clamped && gas.pressure[0].is_finite() && gas.pressure[0] > 0.0);
         assert!(gas.energy().is_finite());
         gas.open_area[0] = 1.0;

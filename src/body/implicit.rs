@@ -1561,7 +1561,7 @@ pub(crate) fn substep(
             gas.refresh_pressures();
             gas_coefficients(gas, &mut s.gas_coef);
         } else {
-            gas_origin = gas.prepare_gradient(x, model.triangles, model.face_fragment, n);
+            gas_origin = gas.prepare_gradient(x, model.triangles, n);
         }
         s.gas_dot.resize(frags, 0.0);
     }
@@ -1776,7 +1776,7 @@ pub(crate) fn substep(
                     if let (Some(gas), Some(origin)) = (gas, origin) {
                         // SAFETY: this member's face chunk of the sums.
                         let six_v = unsafe { gas_six_v.part(c * six_v_parts..(c + 1) * six_v_parts) };
-                        gas.face_chunk_volumes(x, origin, model.triangles, model.face_fragment, c, six_v);
+                        gas.face_chunk_volumes(x, origin, model.triangles, c, six_v);
                     }
                     return;
                 }

@@ -165,7 +165,6 @@ macro_rules! model_of {
         Model {
             settings: &$body.settings,
             triangles: &$body.triangles,
-            face_fragment: &$body.face_fragment,
             springs: &$body.springs,
             mass: &$body.nodes.mass,
             inv_mass: &$body.nodes.inv_mass,
@@ -296,9 +295,9 @@ impl Body {
             // (Only the implicit integrator gathers the gradient by corners; the others measure
             // it face by face and never make them.)
             if settings.integrator == Integrator::ImplicitEuler {
-                gas.prepare_corners(&triangles, &face_fragment, n);
+                gas.prepare_corners(&triangles, n);
             }
-            gas.measure(&nodes.x, &triangles, &face_fragment); // n_rt = 0: volumes only
+            gas.measure(&nodes.x, &triangles); // n_rt = 0: volumes only
             let total: f64 = gas.volume.iter().map(|v| v.max(0.0)).sum();
             for f in 0..fragment_count {
                 let v = gas.volume[f].max(0.0);
@@ -570,7 +569,7 @@ impl Body {
         // The forces measured the gas at the saved positions: measure it again at the current
         // ones, and what the implicit integrator prepared there no longer holds.
         if let Some(gas) = self.gas.as_mut() {
-            gas.measure(&self.nodes.x, &self.triangles, &self.face_fragment);
+            gas.measure(&self.nodes.x, &self.triangles);
         }
         if let Scratch::Implicit(s) = &mut self.scratch {
             s.forget_prepared();
@@ -609,11 +608,8 @@ impl Body {
     fn energy_parts_measuring_gas(&mut self, measure_gas: bool) -> EnergyParts {
         let x = &self.nodes.x;
         let origin = self.gas.as_ref().filter(|_| measure_gas).map(|gas| gas.origins(x));
-        let gas_state = self
-            .gas
-            .as_ref()
-            .zip(origin.as_deref())
-            .map(|(gas, origin)| (gas, origin, &self.triangles[..], &self.face_fragment[..]));
+        let gas_state =
+            self.gas.as_ref().zip(origin.as_deref()).map(|(gas, origin)| (gas, origin, &self.triangles[..]));
         let (kinetic, spring, gravity, max_strain, faces) = energy::state_energies(
             &self.pool,
             &self.springs,
@@ -994,7 +990,7 @@ impl Body {
                 s.forget_prepared();
             }
             if let Some(gas) = self.gas.as_mut() {
-                gas.measure(&self.nodes.x, &self.triangles, &self.face_fragment);
+                gas.measure(&self.nodes.x, &self.triangles);
             }
             // The energies of the state it is back in: a retry starts from them and keeps the
             // last step's excess as its reference (so it fails the same way).
@@ -1198,9 +1194,6 @@ impl Body {
         let n = self.nodes.len();
         let t = Instant::now();
         let fracture = self.fracture.get_or_insert_with(|| Fracture::new(n, self.triangles.len()));
-        // The fragments before the change, in a buffer the fracture keeps.
-        let mut old_face_fragment = std::mem::take(&mut fracture.face_fragment_before);
-        old_face_fragment.clone_from(&self.face_fragment);
         let mut topology = self.topology.take().unwrap_or_else(|| Topology::build(&self.triangles, n));
         trace_phase("start", t);
         let t = Instant::now();
@@ -1260,9 +1253,6 @@ impl Body {
             // generation (a review saw the generation go up every step, each a full rebuild, for
             // a vertex that could never be released).
             self.topology = Some(topology);
-            if let Some(fracture) = self.fracture.as_mut() {
-                fracture.face_fragment_before = old_face_fragment;
-            }
             return (0, 0);
         }
         if let Scratch::Implicit(s) = &mut self.scratch {
@@ -1273,10 +1263,7 @@ impl Body {
             fracture.record_opened_sides(&topology, &self.nodes.x, &self.nodes.rest);
         }
         trace_phase("opened sides", t);
-        self.rebuild(topology, &old_face_fragment);
-        if let Some(fracture) = self.fracture.as_mut() {
-            fracture.face_fragment_before = old_face_fragment;
-        }
+        self.rebuild(topology);
         let t = Instant::now();
         if let (Scratch::Implicit(s), Some(fracture)) = (&mut self.scratch, self.fracture.as_ref()) {
             s.extend_warm_start(&fracture.origin);
@@ -1287,7 +1274,7 @@ impl Body {
 
     /// Rebuilds springs, fragments and gas after a topology change (`topology` is that of the
     /// current triangles); bumps the generation.
-    fn rebuild(&mut self, topology: Topology, old_face_fragment: &[u32]) {
+    fn rebuild(&mut self, topology: Topology) {
         let n = self.nodes.len();
         let t = Instant::now();
         let old_springs = std::mem::take(&mut self.springs);
@@ -1305,7 +1292,7 @@ impl Body {
                 || {
                     old_gas.map(|old| {
                         let mut gas = Gas::new(n, triangles, face_fragment, fragment_count, &topology.boundary_loops);
-                        gas.inherit(&old.n_rt, &old.volume, old_face_fragment, face_fragment, &nodes.x, triangles);
+                        gas.inherit(&old, &nodes.x, triangles);
                         gas
                     })
                 },
@@ -1911,6 +1898,53 @@ mod tests {
             }
         }
         assert!(changes >= 3, "only {changes} steps cracked");
+    }
+
+    /// After a burst the gas keeps the pieces that hold gas, one fragment each, and gathers all
+    /// the others into one fragment without gas and without caps: every face of a piece is in
+    /// one gas fragment, pieces with gas in fragments of their own, the others in the last.
+    #[test]
+    fn a_burst_gas_keeps_the_pieces_with_gas_and_gathers_the_others() {
+        let mesh = sphere(3);
+        let topology = Topology::build(mesh.triangles(), mesh.positions().len());
+        let settings = BodySettings {
+            integrator: Integrator::ImplicitEuler,
+            gravity: Vec3::ZERO,
+            gas_amount: 850.0,
+            spring_stiffness: 400.0,
+            spring_damping: 20.0,
+            break_strain: 0.125,
+            leak_rate: 0.5,
+            ..BodySettings::default()
+        };
+        let mut body = Body::new(&mesh, &topology, settings).unwrap();
+        let mut checked = 0;
+        for step in 0..40 {
+            let generation = body.generation;
+            body.step().unwrap();
+            if body.generation == generation {
+                continue;
+            }
+            let gas = body.gas.as_ref().unwrap();
+            let mut of_piece = std::collections::HashMap::new();
+            for (face, &piece) in body.face_fragment.iter().enumerate() {
+                let g = gas.face_fragment[face];
+                assert_eq!(*of_piece.entry(piece).or_insert(g), g, "step {step}: piece {piece} in two gas fragments");
+            }
+            let holders: std::collections::HashSet<u32> =
+                of_piece.values().copied().filter(|&g| gas.n_rt[g as usize] > 0.0).collect();
+            let pieces_with_gas = of_piece.values().filter(|&&g| gas.n_rt[g as usize] > 0.0).count();
+            assert_eq!(holders.len(), pieces_with_gas, "step {step}: two pieces share a gas fragment");
+            let without = of_piece.len() - pieces_with_gas;
+            let expected = holders.len() + usize::from(without > 0);
+            assert_eq!(gas.fragment_count(), expected, "step {step}: {} pieces", of_piece.len());
+            assert!(gas.caps.iter().all(|cap| gas.n_rt[cap.fragment as usize] > 0.0), "step {step}: a cap without gas");
+            if without > 0 {
+                checked += 1;
+                assert_eq!(gas.n_rt[holders.len()], 0.0, "step {step}: the gathered fragment holds gas");
+            }
+        }
+        assert!(checked >= 3, "only {checked} changes left pieces without gas");
     }
 
     /// Starting a step from what the last one prepared gives the same positions and velocities,

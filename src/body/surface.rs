@@ -64,8 +64,6 @@ pub(crate) struct Fracture {
     /// (whose first-touch page faults cost more than the work).
     pub spare: TopologySpare,
     pub before: Vec<[u32; 3]>,
-    /// The fragment of each face before the change (kept, as `before`).
-    pub face_fragment_before: Vec<u32>,
     /// Per vertex (as far as it is long), true for the vertices of a released core block and
     /// the centre of the patch it left: they release no block themselves (see
     /// `core_block::release`).
@@ -84,7 +82,6 @@ impl Fracture {
             origin: (0..vertex_count as u32).collect(),
             spare: TopologySpare::default(),
             before: Vec::new(),
-            face_fragment_before: Vec::new(),
             in_core: Vec::new(),
             opened_rest: Vec::new(),
         }
@@ -168,14 +165,12 @@ impl Fracture {
         fracture.spare = TopologySpare::for_topology(topology, headroom);
         fracture.before = vec![[u32::MAX; 3]; face_count + more(face_count)];
         fracture.before.clear();
-        fracture.face_fragment_before = vec![u32::MAX; face_count + more(face_count)];
-        fracture.face_fragment_before.clear();
         fracture
     }
 
     pub fn memory_bytes(&self) -> usize {
         self.broken.capacity()
-            + (self.origin.capacity() + self.face_fragment_before.capacity()) * 4
+            + self.origin.capacity() * 4
             + self.spare.memory_bytes()
             + self.before.capacity() * 12
             + self.in_core.capacity()

@@ -77,7 +77,7 @@ pub(crate) fn add_applied_forces(
     }
     if let Some(gas) = gas {
         s.gradient.resize(x.len(), Vec3::ZERO);
-        gas.measure_with_gradient(x, model.triangles, model.face_fragment, &mut s.gradient);
+        gas.measure_with_gradient(x, model.triangles, &mut s.gradient);
         for (i, g) in s.gradient.iter().enumerate() {
             let fragment = gas.vertex_fragment[i];
             if fragment != u32::MAX {
@@ -157,7 +157,7 @@ pub(crate) fn substep(
     let (stiffness_h2, damping_h) = (ks * h * h, kd * h);
     for _ in 0..iterations.max(1) {
         if let Some(gas) = gas.as_deref_mut() {
-            gas.measure_with_gradient(x, model.triangles, model.face_fragment, &mut s.gradient);
+            gas.measure_with_gradient(x, model.triangles, &mut s.gradient);
             s.gas_norm.fill(0.0);
             for (i, g) in s.gradient.iter().enumerate() {
                 let f = gas.vertex_fragment[i];
