@@ -32,7 +32,8 @@ pub(crate) struct Gas {
     /// gas, then one more for all the faces of pieces without gas, when there are such (see
     /// [`Gas::inherit`]).
     pub face_fragment: Vec<u32>,
-    /// Fragment of each vertex (`u32::MAX` for a vertex used by no face).
+    /// Fragment of each vertex (`u32::MAX` for a vertex used by no face, or by faces of pieces
+    /// without gas: see [`Gas::keep_fragments_with_gas`]).
     pub vertex_fragment: Vec<u32>,
     /// Per slice of eight vertices, their `vertex_fragment` when they share it (`u32::MAX`: none
     /// of them is used by a face), else [`MIXED_FRAGMENTS`] ([`slice_fragments`]): the solve's
@@ -902,6 +903,12 @@ impl Gas {
         }
         let face_fragment: Vec<u32> = self.face_fragment.iter().map(|&f| kept[f as usize]).collect();
         let mut gas = Gas::new(self.vertex_fragment.len(), triangles, &face_fragment, holders.len() + 1, &[]);
+        // Their vertices count as vertices without gas: the solver's passes then take their
+        // slices without a gas term (a zero one before).
+        for f in gas.vertex_fragment.iter_mut().filter(|f| **f == without) {
+            *f = u32::MAX;
+        }
+        gas.slice_vertex_fragment = slice_fragments(&gas.vertex_fragment);
         gas.caps = std::mem::take(&mut self.caps)
             .into_iter()
             .filter(|cap| kept[cap.fragment as usize] != without)
