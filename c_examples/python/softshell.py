@@ -720,7 +720,10 @@ class Body(_Handle):
     def break_edges(self, pairs):
         """Breaks the edges of `pairs` (vertex pairs, shape (k, 2)) in one topology change, all or
         none: if a pair is refused, nothing changes. Returns the springs broken."""
-        pairs = np.ascontiguousarray(np.asarray(pairs, dtype=np.uint32).reshape(-1, 2))
+        pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+        if pairs.size and (pairs.min() < 0 or pairs.max() > 0xFFFFFFFF):
+            raise ValueError("vertex indices must be in [0, 2**32)")
+        pairs = np.ascontiguousarray(pairs, dtype=np.uint32)
         broken = ctypes.c_size_t(0)
         _check(C.body_break_edges(self.handle, pairs.ctypes.data_as(_pu32), len(pairs), ctypes.byref(broken)))
         return broken.value

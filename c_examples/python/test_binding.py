@@ -240,6 +240,8 @@ class Buffers(unittest.TestCase):
         with self.assertRaises(softshell.Error) as caught:
             body.break_edges(good + [(int(t[0, 0]), int(t[0, 0]))])
         self.assertIn("pair 2", str(caught.exception))
+        with self.assertRaises(ValueError):
+            body.break_edges([(-1, 0)])  # not wrapped round to a large index
         self.assertEqual(body.topology_generation, 0)
         self.assertEqual(body.break_edges(good + [good[0][::-1]]), 2)
         self.assertEqual(body.topology_generation, 1, "one change for the whole cut")

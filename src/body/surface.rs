@@ -93,7 +93,7 @@ impl Fracture {
     /// through later splits of its ends (as the crack runs on) and core blocks.
     pub fn record_opened_sides(&mut self, topology: &Topology, x: &[Vec3], rest: &[Vec3]) {
         // The sides are visited in key order, as the known ones are kept: a cursor walks those
-        // alongside, and the new ones (in key order too) are merged in at the end. (A search
+        // alongside, and the new ones (in key order too) are merged in at the end, in place. (A search
         // in the known sides for each, and a sort of all of them after, took 0.26-0.66 ms of
         // each step of the issue-5 balloon's fracture storm, thousands of sides.)
         let mut new = Vec::new();
@@ -110,17 +110,22 @@ impl Fracture {
                 new.push((key, opened_side_rest((x[b] - x[a]).length(), (rest[b] - rest[a]).length())));
             }
         }
-        if new.is_empty() {
-            return;
+        // Merged in place from the back (the new keys are none of the known ones).
+        let known = self.opened_rest.len();
+        self.opened_rest.resize(known + new.len(), (0, 0.0));
+        let (mut i, mut j) = (known, new.len());
+        for k in (0..known + new.len()).rev() {
+            if j == 0 {
+                break;
+            }
+            if i > 0 && self.opened_rest[i - 1].0 > new[j - 1].0 {
+                self.opened_rest[k] = self.opened_rest[i - 1];
+                i -= 1;
+            } else {
+                self.opened_rest[k] = new[j - 1];
+                j -= 1;
+            }
         }
-        let old = std::mem::take(&mut self.opened_rest);
-        self.opened_rest.reserve(old.len() + new.len());
-        let (mut old, mut new) = (old.into_iter().peekable(), new.into_iter().peekable());
-        while let (Some(o), Some(n)) = (old.peek(), new.peek()) {
-            let next = if o.0 < n.0 { old.next() } else { new.next() };
-            self.opened_rest.extend(next);
-        }
-        self.opened_rest.extend(old.chain(new));
     }
 
     /// The rest length recorded for side `side` of face `face`, if its crack has opened.
@@ -421,13 +426,24 @@ mod tests {
         // Each round's springs are rebuilt into the buffers of the round before (as a crack
         // does): the same springs as a new build.
         let mut previous = build_springs(&topology, None, &rest);
-        let mut border_bits = 0;
+        let (mut border_bits, mut opened_sides) = (0, 0);
         for round in 0..50 {
             let mut fracture = Fracture::new(rest.len(), triangles.len());
             for bits in &mut fracture.broken {
                 state = state.wrapping_mul(1_103_515_245).wrapping_add(12345);
                 *bits = if (state >> 16) % 4 == 0 { ((state >> 20) % 8) as u8 } else { 0 };
             }
+            // Rest lengths of their own for the sides of the hole (as opened cracks have them),
+            // each after broken edges and before others: the spring of each is found from its
+            // edge.
+            let mut opened = std::collections::BTreeMap::new();
+            for e in (0..topology.edges.len()).filter(|&e| topology.edge_face_count[e] == 1) {
+                let f = topology.edge_faces[e][0];
+                if let Some(side) = side_of(&topology, f, e as u32).filter(|_| (state >> (e % 13)) & 1 == 1) {
+                    opened.insert(3 * f + side as u32, (e, 100.0 + e as f32 + round as f32 / 64.0));
+                }
+            }
+            fracture.opened_rest = opened.iter().map(|(&key, &(_, length))| (key, length)).collect();
             let springs = build_springs(&topology, Some(&fracture), &rest);
             let reused = rebuild_springs(&topology, Some(&fracture), &rest, std::mem::take(&mut previous));
             assert_eq!(
@@ -454,10 +470,15 @@ mod tests {
                 assert!(springs.ends.contains(&topology.edges[e]), "round {round}: border edge {e} lost its spring");
             }
             assert!(springs.ends.len() < topology.edges.len(), "round {round}: some springs must break");
+            let own: std::collections::HashMap<[u32; 2], f32> =
+                opened.values().map(|&(e, length)| (topology.edges[e], length)).collect();
             for (&[a, b], &l) in springs.ends.iter().zip(&springs.rest) {
-                assert_eq!(l, (rest[b as usize] - rest[a as usize]).length());
+                let length = own.get(&[a, b]).copied().unwrap_or((rest[b as usize] - rest[a as usize]).length());
+                assert_eq!(l, length, "round {round}: spring {a}-{b}");
             }
+            opened_sides += own.len();
         }
+        assert!(opened_sides > 20, "only {opened_sides} sides had rest lengths of their own");
         assert!(border_bits > 0, "no round marked a border side broken");
         assert_eq!(build_springs(&topology, None, &rest).ends, topology.edges);
     }
