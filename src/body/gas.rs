@@ -19,6 +19,12 @@ pub(crate) struct Cap {
     pub ring: Vec<u32>,
 }
 
+/// Tests only: topology changes keep every fragment's gas fragment (no gathering, see
+/// [`Gas::keep_fragments_with_gas`]), for a run to compare with. Global, as the gas may be rebuilt
+/// on a pool's thread; only one test sets it, and other tests are only slower meanwhile.
+#[cfg(test)]
+pub(crate) static KEEP_EVERY_FRAGMENT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 /// Gas state of every fragment.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Gas {
@@ -28,12 +34,13 @@ pub(crate) struct Gas {
     pub v_min: Vec<f64>,
     /// Caps over the boundary loops.
     pub caps: Vec<Cap>,
-    /// The gas fragment of each face: the body's fragments (its connected pieces) that hold
-    /// gas, then one more for all the faces of pieces without gas, when there are such (see
-    /// [`Gas::inherit`]).
+    /// The gas fragment of each face: one per fragment of the body (its connected pieces) when
+    /// made; after a topology change one per piece that holds gas, then one more for all the
+    /// faces of pieces without gas, when there are such ([`Gas::inherit`]). (A piece whose gas
+    /// leaks to nothing keeps its own until the next change.)
     pub face_fragment: Vec<u32>,
-    /// Fragment of each vertex (`u32::MAX` for a vertex used by no face, or by faces of pieces
-    /// without gas: see [`Gas::keep_fragments_with_gas`]).
+    /// Fragment of each vertex (`u32::MAX` for a vertex used by no face, or, after a topology
+    /// change, by faces of pieces without gas: see [`Gas::keep_fragments_with_gas`]).
     pub vertex_fragment: Vec<u32>,
     /// Per slice of eight vertices, their `vertex_fragment` when they share it (`u32::MAX`: none
     /// of them is used by a face), else [`MIXED_FRAGMENTS`] ([`slice_fragments`]): the solve's
@@ -94,7 +101,7 @@ pub(crate) const FACE_CHUNK: usize = 4096;
 pub(crate) const SHRED_FRACTION: f64 = 1e-3;
 
 /// Fraction of a fragment's volume at gas assignment below which the pressure is clamped.
-const CLAMP_FRACTION: f64 = 1e-2;
+pub(crate) const CLAMP_FRACTION: f64 = 1e-2;
 
 /// 1/6 (each gradient term is a cross product over 6; a multiplication, where three f64
 /// divisions per triangle corner were a third of the gathering pass).
@@ -891,6 +898,10 @@ impl Gas {
     /// springs, vertices, pieces and CG iterations of every cracking step alike). Nothing
     /// changes when every fragment holds gas.
     fn keep_fragments_with_gas(&mut self, triangles: &[[u32; 3]]) {
+        #[cfg(test)]
+        if KEEP_EVERY_FRAGMENT.load(std::sync::atomic::Ordering::Relaxed) {
+            return;
+        }
         let n = self.fragment_count();
         let holders: Vec<usize> = (0..n).filter(|&f| self.n_rt[f] > 0.0).collect();
         if holders.len() == n {

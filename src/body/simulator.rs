@@ -1462,6 +1462,7 @@ impl Body {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::body::gas;
 
     /// A sphere of radius 1 made from an octahedron split `levels` times (closed, outward).
     fn sphere(levels: u32) -> TriMesh {
@@ -1921,19 +1922,7 @@ mod tests {
     /// one gas fragment, pieces with gas in fragments of their own, the others in the last.
     #[test]
     fn a_burst_gas_keeps_the_pieces_with_gas_and_gathers_the_others() {
-        let mesh = sphere(3);
-        let topology = Topology::build(mesh.triangles(), mesh.positions().len());
-        let settings = BodySettings {
-            integrator: Integrator::ImplicitEuler,
-            gravity: Vec3::ZERO,
-            gas_amount: 850.0,
-            spring_stiffness: 400.0,
-            spring_damping: 20.0,
-            break_strain: 0.125,
-            leak_rate: 0.5,
-            ..BodySettings::default()
-        };
-        let mut body = Body::new(&mesh, &topology, settings).unwrap();
+        let mut body = burst_ball(Integrator::ImplicitEuler, 1);
         let mut checked = 0;
         for step in 0..40 {
             let generation = body.generation;
@@ -1959,8 +1948,90 @@ mod tests {
                 checked += 1;
                 assert_eq!(gas.n_rt[holders.len()], 0.0, "step {step}: the gathered fragment holds gas");
             }
+            // Every vertex is in its faces' gas fragment, or in none when that holds no gas; the
+            // slices and caps follow; the clamp is that of the volume the gas was given at.
+            for (face, t) in body.triangles.iter().enumerate() {
+                let g = gas.face_fragment[face];
+                let want = if gas.n_rt[g as usize] > 0.0 { g } else { u32::MAX };
+                assert!(t.iter().all(|&v| gas.vertex_fragment[v as usize] == want), "step {step}: face {face}");
+            }
+            assert_eq!(gas.slice_vertex_fragment, gas::slice_fragments(&gas.vertex_fragment), "step {step}");
+            for cap in &gas.caps {
+                assert_eq!(cap.fragment, gas.vertex_fragment[cap.ring[0] as usize], "step {step}: a cap's fragment");
+            }
+            for &g in &holders {
+                let g = g as usize;
+                assert_eq!(gas.v_min[g], gas::CLAMP_FRACTION * gas.volume[g], "step {step}: fragment {g}'s clamp");
+            }
         }
         assert!(checked >= 3, "only {checked} changes left pieces without gas");
+    }
+
+    /// The ball of [`a_burst_gas_keeps_the_pieces_with_gas_and_gathers_the_others`]: more gas
+    /// than its springs bear, it bursts into hundreds of pieces within 40 steps.
+    fn burst_ball(integrator: Integrator, threads: u32) -> Body {
+        let mesh = sphere(3);
+        let topology = Topology::build(mesh.triangles(), mesh.positions().len());
+        let settings = BodySettings {
+            integrator,
+            gravity: Vec3::ZERO,
+            gas_amount: 850.0,
+            spring_stiffness: 400.0,
+            spring_damping: 20.0,
+            break_strain: 0.125,
+            leak_rate: 0.5,
+            threads,
+            ..BodySettings::default()
+        };
+        Body::new(&mesh, &topology, settings).unwrap()
+    }
+
+    /// Gathering the pieces without gas changes nothing but the bookkeeping: a burst runs to the
+    /// bit as when every piece keeps a gas fragment of its own (positions, velocities, stats,
+    /// and each piece's gas: nRT, clamp, volume, hole area, pressure), with implicit Euler on
+    /// one thread and two, and with XPBD.
+    #[test]
+    fn gathering_the_pieces_without_gas_changes_no_bit() {
+        use std::sync::atomic::Ordering::Relaxed;
+        // Per step: positions, velocities, the stats' volume, pressure and CG iterations, and
+        // per piece (the body's fragment) its gas.
+        type Run = Vec<(Vec<u32>, f64, f64, u64, Vec<[u64; 5]>)>;
+        let run = |integrator: Integrator, threads: u32| -> Run {
+            let mut body = burst_ball(integrator, threads);
+            (0..40)
+                .map(|_| {
+                    let stats = body.step().unwrap();
+                    let gas = body.gas.as_ref().unwrap();
+                    let mut pieces: Vec<[u64; 5]> = vec![[0; 5]; body.fragment_count];
+                    for (face, &piece) in body.face_fragment.iter().enumerate() {
+                        let g = gas.face_fragment[face] as usize;
+                        let of = |a: &[f64]| a[g].to_bits();
+                        let values = if gas.n_rt[g] > 0.0 {
+                            [of(&gas.n_rt), of(&gas.v_min), of(&gas.volume), of(&gas.open_area), of(&gas.pressure)]
+                        } else {
+                            [0; 5]
+                        };
+                        pieces[piece as usize] = values;
+                    }
+                    let bits: Vec<u32> =
+                        body.nodes.x.iter().chain(&body.nodes.v).flat_map(|p| p.to_array()).map(f32::to_bits).collect();
+                    (bits, stats.volume, stats.pressure, stats.solver_iterations, pieces)
+                })
+                .collect()
+        };
+        for (integrator, threads) in
+            [(Integrator::ImplicitEuler, 1), (Integrator::ImplicitEuler, 2), (Integrator::Xpbd, 1)]
+        {
+            let gathered = run(integrator, threads);
+            gas::KEEP_EVERY_FRAGMENT.store(true, Relaxed);
+            let kept = run(integrator, threads);
+            gas::KEEP_EVERY_FRAGMENT.store(false, Relaxed);
+            let pieces = gathered.last().unwrap().4.len();
+            assert!(pieces > 100, "{integrator:?}: only {pieces} pieces");
+            for (step, (a, b)) in gathered.iter().zip(&kept).enumerate() {
+                assert!(a == b, "{integrator:?} on {threads} threads, step {step}: the runs differ");
+            }
+        }
     }
 
     /// Starting a step from what the last one prepared gives the same positions and velocities,
