@@ -1327,9 +1327,8 @@ impl Body {
     /// refused (an index out of range, no spring between its vertices, an edge of one face) the
     /// error names the first pair refused (by the checks of indices and springs, then by those
     /// of the edges' faces) and nothing changes. One change instead of one per edge: the
-    /// surface opens
-    /// once, where the whole cut passes, and the cut costs one fracture phase (about 1 ms on the
-    /// issue-5 balloon) instead of one per edge.
+    /// surface opens once, where the whole cut passes, and the cut costs one fracture phase
+    /// (about 1 ms on the issue-5 balloon) instead of one per edge.
     pub fn break_edges(&mut self, pairs: &[[u32; 2]]) -> Result<u64> {
         let which = |k: usize| if pairs.len() > 1 { format!(" (pair {k})") } else { String::new() };
         let mut keys = Vec::with_capacity(pairs.len());
