@@ -1331,14 +1331,15 @@ impl Body {
     /// (about 1 ms on the issue-5 balloon) instead of one per edge.
     pub fn break_edges(&mut self, pairs: &[[u32; 2]]) -> Result<u64> {
         let which = |k: usize| if pairs.len() > 1 { format!(" (pair {k})") } else { String::new() };
-        let mut keys = Vec::with_capacity(pairs.len());
+        // Each pair's edge in the body's numbering, smaller vertex first.
+        let mut checked = Vec::with_capacity(pairs.len());
         for (k, &[a, b]) in pairs.iter().enumerate() {
-            let (i, j) = (
-                self.check_vertex(a, "a").map_err(|e| Error::invalid_argument(format!("{}{}", e.message, which(k))))?
-                    as u32,
-                self.check_vertex(b, "b").map_err(|e| Error::invalid_argument(format!("{}{}", e.message, which(k))))?
-                    as u32,
-            );
+            let vertex = |v: u32, name: &str| {
+                self.check_vertex(v, name)
+                    .map(|i| i as u32)
+                    .map_err(|e| Error::invalid_argument(format!("{}{}", e.message, which(k))))
+            };
+            let (i, j) = (vertex(a, "a")?, vertex(b, "b")?);
             let key = [i.min(j), i.max(j)];
             // The springs are the edges in their sorted order without the broken ones.
             if a == b || self.springs.ends.binary_search(&key).is_err() {
@@ -1348,23 +1349,19 @@ impl Body {
                     which(k)
                 )));
             }
-            keys.push(key);
+            checked.push(key);
         }
-        if keys.is_empty() {
+        if checked.is_empty() {
             return Ok(0);
         }
-        keys.sort_unstable();
-        keys.dedup();
         // The kept topology tells each edge's faces; a body without one builds it here, and
         // keeps it only for a cut that goes ahead (the change would build it all the same): a
         // refused cut leaves the body as it was, its memory too.
         let n = self.nodes.len();
         let built = self.topology.is_none().then(|| Topology::build(&self.triangles, n));
         let topology = self.topology.as_ref().or(built.as_ref()).expect("kept or built");
-        for (k, &[a, b]) in pairs.iter().enumerate() {
-            let (i, j) = (self.order.internal(a as usize) as u32, self.order.internal(b as usize) as u32);
-            let one_face =
-                topology.edges.binary_search(&[i.min(j), i.max(j)]).map_or(true, |e| topology.edge_face_count[e] < 2);
+        for (k, (&[a, b], key)) in pairs.iter().zip(&checked).enumerate() {
+            let one_face = topology.edges.binary_search(key).map_or(true, |e| topology.edge_face_count[e] < 2);
             if one_face {
                 return Err(Error::invalid_argument(format!(
                     "the edge of vertices {a} and {b}{} has one face: a cut parts two faces, and this edge is on \
@@ -1376,6 +1373,9 @@ impl Body {
         if let Some(built) = built {
             self.topology = Some(built);
         }
+        let mut keys = checked;
+        keys.sort_unstable();
+        keys.dedup();
         let before = match self.energy_now.take() {
             Some(energies) => energies,
             None => self.energy_parts(),
