@@ -426,8 +426,24 @@ pub(crate) fn torus_grid(nu: u32, nv: u32) -> Vec<[u32; 3]> {
     t
 }
 
+/// A small deterministic generator for the tests of the topology and its update.
+#[cfg(test)]
+pub(crate) mod tests_rng {
+    pub(crate) struct Rng(pub u64);
+
+    impl Rng {
+        pub(crate) fn below(&mut self, n: u32) -> u32 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            ((self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 32) % n as u64) as u32
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use super::tests_rng::Rng;
     use super::*;
 
     /// Asserts that the fast build gives exactly what the reference build gives.
@@ -515,17 +531,6 @@ mod tests {
     }
 
     /// A small deterministic generator (xorshift64*).
-    struct Rng(u64);
-
-    impl Rng {
-        fn below(&mut self, n: u32) -> u32 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            ((self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 32) % n as u64) as u32
-        }
-    }
-
     #[test]
     #[cfg(feature = "obj")]
     fn fast_build_matches_the_reference_on_the_shared_meshes() {
