@@ -230,6 +230,12 @@ fn trace_phase(what: &str, started: Instant) {
     }
 }
 
+struct TraceOnDrop(Instant);
+impl Drop for TraceOnDrop {
+    fn drop(&mut self) {
+        trace_phase("  gas", self.0)
+    }
+}
 fn triangle_area(x: &[Vec3], t: [u32; 3]) -> f64 {
     let p = t.map(|i| x[i as usize].as_dvec3());
     0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length()
@@ -1283,7 +1289,6 @@ impl Body {
     /// Rebuilds springs, fragments and gas after a topology change (`topology` is that of the
     /// current triangles); bumps the generation.
     fn rebuild(&mut self, topology: Topology) {
-        let n = self.nodes.len();
         let t = Instant::now();
         let old_springs = std::mem::take(&mut self.springs);
         self.face_fragment.clone_from(&topology.face_components);
@@ -1296,12 +1301,24 @@ impl Body {
             let (triangles, face_fragment, fragment_count) =
                 (&self.triangles, &self.face_fragment, self.fragment_count);
             self.pool.join(
-                || rebuild_springs(topology, fracture, &nodes.rest, old_springs),
                 || {
+                    let t = Instant::now();
+                    let r = rebuild_springs(topology, fracture, &nodes.rest, old_springs);
+                    trace_phase("  springs", t);
+                    r
+                },
+                || {
+                    let t = Instant::now();
+                    let _g = TraceOnDrop(t);
                     old_gas.map(|old| {
-                        let mut gas = Gas::new(n, triangles, face_fragment, fragment_count, &topology.boundary_loops);
-                        gas.inherit(&old, &nodes.x, triangles);
-                        gas
+                        Gas::after_change(
+                            &old,
+                            &nodes.x,
+                            triangles,
+                            face_fragment,
+                            fragment_count,
+                            &topology.boundary_loops,
+                        )
                     })
                 },
             )
