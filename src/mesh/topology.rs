@@ -426,7 +426,7 @@ pub(crate) fn torus_grid(nu: u32, nv: u32) -> Vec<[u32; 3]> {
     t
 }
 
-/// A small deterministic generator for the tests of the topology and its update.
+/// A small deterministic generator (xorshift64*) for the tests of the topology and its update.
 #[cfg(test)]
 pub(crate) mod tests_rng {
     pub(crate) struct Rng(pub u64);
@@ -530,7 +530,6 @@ mod tests {
         (triangles, vertices)
     }
 
-    /// A small deterministic generator (xorshift64*).
     #[test]
     #[cfg(feature = "obj")]
     fn fast_build_matches_the_reference_on_the_shared_meshes() {
