@@ -435,6 +435,12 @@ impl CoarseSpace {
         self.index_rows();
     }
 
+    /// The aggregate of vertex `v`, if the level knows it.
+    #[cfg(test)]
+    pub fn aggregate_of(&self, v: usize) -> Option<u32> {
+        self.aggregate.get(v).copied()
+    }
+
     /// What a team reads (the factor and the aggregates), and the buffers its members write in
     /// turn.
     pub fn split(&mut self) -> (CoarseView<'_>, CoarseBuffers<'_>) {

@@ -19,11 +19,21 @@ pub(crate) struct Cap {
     pub ring: Vec<u32>,
 }
 
-/// Tests only: topology changes keep every fragment's gas fragment (no gathering, see
-/// [`Gas::keep_fragments_with_gas`]), for a run to compare with. Global, as the gas may be rebuilt
-/// on a pool's thread; only one test sets it, and other tests are only slower meanwhile.
+/// Tests only: topology changes keep every fragment's gas fragment (no gathering, neither before
+/// the measurement in [`Gas::after_change`] nor after it in [`Gas::keep_fragments_with_gas`]),
+/// for a run to compare with. Global, as the gas may be rebuilt on a pool's thread; only one test
+/// sets it, and other tests are only slower meanwhile.
 #[cfg(test)]
 pub(crate) static KEEP_EVERY_FRAGMENT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Tests only: [`Gas::after_change`] also makes the gas as it was made before it gathered
+/// pieces early ([`Gas::new`], then [`Gas::inherit`]) and panics unless the two are alike in
+/// every field; [`GATHERED_EARLY`] counts the changes checked that gathered pieces early.
+/// Global, like [`KEEP_EVERY_FRAGMENT`]: other tests only check more meanwhile.
+#[cfg(test)]
+pub(crate) static CHECK_AFTER_CHANGE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+#[cfg(test)]
+pub(crate) static GATHERED_EARLY: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 /// Gas state of every fragment.
 #[derive(Clone, Debug, Default)]
@@ -404,7 +414,8 @@ impl Gas {
         let keep_every = KEEP_EVERY_FRAGMENT.load(std::sync::atomic::Ordering::Relaxed);
         #[cfg(not(test))]
         let keep_every = false;
-        let mut gas = if keep_every || may_hold.iter().all(|&m| m) {
+        let gather_early = !keep_every && !may_hold.iter().all(|&m| m);
+        let mut gas = if !gather_early {
             Gas::new(vertex_count, triangles, face_fragment, fragment_count, boundary_loops)
         } else {
             // The fragments that may hold gas keep their order, numbered from 0; the others
@@ -432,6 +443,15 @@ impl Gas {
             )
         };
         gas.inherit(old, x, triangles);
+        #[cfg(test)]
+        if CHECK_AFTER_CHANGE.load(std::sync::atomic::Ordering::Relaxed) {
+            let mut made_late = Gas::new(vertex_count, triangles, face_fragment, fragment_count, boundary_loops);
+            made_late.inherit(old, x, triangles);
+            assert_eq!(format!("{gas:?}"), format!("{made_late:?}"), "the gas gathered early differs");
+            if gather_early {
+                GATHERED_EARLY.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            }
+        }
         gas
     }
 

@@ -220,6 +220,14 @@ impl ImplicitScratch {
         self.rows_one_at_a_time = one_at_a_time;
     }
 
+    /// The warm start of the next solve (the last Δv per vertex) and the coarse level's
+    /// aggregate of each vertex (None for a vertex it does not know, or without the level).
+    #[cfg(test)]
+    pub fn warm_start_and_aggregates(&self) -> (&[Vec3A], Vec<Option<u32>>) {
+        let aggregates = (0..self.dv.len()).map(|v| self.coarse.as_ref().and_then(|c| c.aggregate_of(v))).collect();
+        (&self.dv, aggregates)
+    }
+
     /// Whether the last substep prepared the next.
     #[cfg(test)]
     pub fn has_prepared(&self) -> bool {

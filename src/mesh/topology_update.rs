@@ -657,10 +657,8 @@ mod tests {
                 let old = triangles.clone();
                 for _ in 0..1 + rng.below(3) {
                     let f = rng.below(triangles.len() as u32) as usize;
-                    for c in 0..3 {
-                        triangles[f][c] = vertices;
-                        vertices += 1;
-                    }
+                    triangles[f] = [vertices, vertices + 1, vertices + 2];
+                    vertices += 3;
                 }
                 // Rounds 3 and 4 of every fourth case: a pinch left (and one made: a corner
                 // of one face welded to a vertex of another); of the next ones a face turned
@@ -780,10 +778,8 @@ mod tests {
                     let loops = &topology.boundary_loops;
                     match rng.below(16) {
                         0 | 1 => {
-                            for c in 0..3 {
-                                triangles[f][c] = vertices;
-                                vertices += 1;
-                            }
+                            triangles[f] = [vertices, vertices + 1, vertices + 2];
+                            vertices += 3;
                         }
                         2 | 3 => {
                             triangles[f][rng.below(3) as usize] = vertices;
