@@ -30,6 +30,10 @@ pub(crate) static KEEP_EVERY_FRAGMENT: std::sync::atomic::AtomicBool = std::sync
 /// pieces early ([`Gas::new`], then [`Gas::inherit`]) and panics unless the two are alike in
 /// every field; [`GATHERED_EARLY`] counts the changes checked that gathered pieces early.
 /// Global, like [`KEEP_EVERY_FRAGMENT`]: other tests only check more meanwhile.
+/// Tests only: held by the tests that set [`KEEP_EVERY_FRAGMENT`] or [`CHECK_AFTER_CHANGE`],
+/// so that neither sees the other's setting change under it.
+#[cfg(test)]
+pub(crate) static GATHERING_TESTS: std::sync::Mutex<()> = std::sync::Mutex::new(());
 #[cfg(test)]
 pub(crate) static CHECK_AFTER_CHANGE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 #[cfg(test)]
@@ -443,10 +447,16 @@ impl Gas {
             )
         };
         gas.inherit(old, x, triangles);
+        if !keep_every {
+            gas.keep_fragments_with_gas(triangles);
+        }
         #[cfg(test)]
         if CHECK_AFTER_CHANGE.load(std::sync::atomic::Ordering::Relaxed) {
             let mut made_late = Gas::new(vertex_count, triangles, face_fragment, fragment_count, boundary_loops);
             made_late.inherit(old, x, triangles);
+            if !keep_every {
+                made_late.keep_fragments_with_gas(triangles);
+            }
             assert_eq!(format!("{gas:?}"), format!("{made_late:?}"), "the gas gathered early differs");
             if gather_early {
                 GATHERED_EARLY.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -940,7 +950,8 @@ impl Gas {
     /// (capped) volumes, so the pressure does not jump. Shreds, children with less than
     /// [`SHRED_FRACTION`] of their parent's volume before the change, get no gas: it escapes
     /// through the burst (a gas in a near-zero volume would be arbitrarily stiff,
-    /// `∂P/∂V = -P/V`). Then the fragments without gas are dropped ([`Gas::keep_fragments_with_gas`]).
+    /// `∂P/∂V = -P/V`). ([`Gas::after_change`] then gathers the fragments without gas,
+    /// [`Gas::keep_fragments_with_gas`].)
     pub fn inherit(&mut self, old: &Gas, x: &[Vec3], triangles: &[[u32; 3]]) {
         let (old_n_rt, old_volume, old_face_fragment) = (&old.n_rt, &old.volume, &old.face_fragment);
         let n = self.fragment_count();
@@ -981,7 +992,6 @@ impl Gas {
         // pressures follow the new nRT (a second measurement was a pass over every face, about
         // 0.07 ms of the issue-5 balloon's first cracking step).
         self.refresh_pressures();
-        self.keep_fragments_with_gas(triangles);
     }
 
     /// Keeps the fragments that hold gas, numbered in their order, and gathers all the others
@@ -994,10 +1004,6 @@ impl Gas {
     /// springs, vertices, pieces and CG iterations of every cracking step alike). Nothing
     /// changes when every fragment holds gas.
     fn keep_fragments_with_gas(&mut self, triangles: &[[u32; 3]]) {
-        #[cfg(test)]
-        if KEEP_EVERY_FRAGMENT.load(std::sync::atomic::Ordering::Relaxed) {
-            return;
-        }
         let n = self.fragment_count();
         let holders: Vec<usize> = (0..n).filter(|&f| self.n_rt[f] > 0.0).collect();
         if holders.len() == n {

@@ -2109,6 +2109,15 @@ mod tests {
     #[test]
     fn the_gas_gathered_early_is_the_gas_gathered_late() {
         use std::sync::atomic::Ordering::Relaxed;
+        let _alone = gas::GATHERING_TESTS.lock().unwrap_or_else(|e| e.into_inner());
+        // Off again when this test ends, also by a panic.
+        struct CheckOff;
+        impl Drop for CheckOff {
+            fn drop(&mut self) {
+                gas::CHECK_AFTER_CHANGE.store(false, Relaxed);
+            }
+        }
+        let _off = CheckOff;
         gas::CHECK_AFTER_CHANGE.store(true, Relaxed);
         let gathered_before = gas::GATHERED_EARLY.load(Relaxed);
         let integrators =
@@ -2131,7 +2140,6 @@ mod tests {
                 assert!(pieces > 100, "{integrator:?}, {threads} threads: {pieces} pieces after {} steps", body.steps);
             }
         }
-        gas::CHECK_AFTER_CHANGE.store(false, Relaxed);
         // (Other tests may add to the count meanwhile, never take from it.)
         assert!(gas::GATHERED_EARLY.load(Relaxed) >= gathered_before + 8, "the bursts gathered pieces early");
     }
@@ -2143,6 +2151,15 @@ mod tests {
     #[test]
     fn gathering_the_pieces_without_gas_changes_no_bit() {
         use std::sync::atomic::Ordering::Relaxed;
+        let _alone = gas::GATHERING_TESTS.lock().unwrap_or_else(|e| e.into_inner());
+        // Gathering on again when this test ends, also by a panic.
+        struct GatherAgain;
+        impl Drop for GatherAgain {
+            fn drop(&mut self) {
+                gas::KEEP_EVERY_FRAGMENT.store(false, Relaxed);
+            }
+        }
+        let _again = GatherAgain;
         // Per step: positions, velocities, the stats' volume, pressure and CG iterations, and
         // per piece (the body's fragment) its gas.
         type Run = Vec<(Vec<u32>, f64, f64, u64, Vec<[u64; 5]>)>;
