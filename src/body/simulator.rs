@@ -2102,6 +2102,22 @@ mod tests {
         Body::new(&mesh, &topology, settings).unwrap()
     }
 
+    /// A test switch of the gas, on while this lives (off again also when the test panics).
+    struct SwitchOn(&'static std::sync::atomic::AtomicBool);
+
+    impl SwitchOn {
+        fn set(switch: &'static std::sync::atomic::AtomicBool) -> Self {
+            switch.store(true, std::sync::atomic::Ordering::Relaxed);
+            Self(switch)
+        }
+    }
+
+    impl Drop for SwitchOn {
+        fn drop(&mut self) {
+            self.0.store(false, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+
     /// The gas after a topology change, with the pieces whose parent held no gas gathered
     /// before anything is measured ([`Gas::after_change`]), is the gas made as before (every
     /// piece measured, capped and given its share, then the pieces without gas gathered), in
@@ -2110,15 +2126,7 @@ mod tests {
     fn the_gas_gathered_early_is_the_gas_gathered_late() {
         use std::sync::atomic::Ordering::Relaxed;
         let _alone = gas::GATHERING_TESTS.lock().unwrap_or_else(|e| e.into_inner());
-        // Off again when this test ends, also by a panic.
-        struct CheckOff;
-        impl Drop for CheckOff {
-            fn drop(&mut self) {
-                gas::CHECK_AFTER_CHANGE.store(false, Relaxed);
-            }
-        }
-        let _off = CheckOff;
-        gas::CHECK_AFTER_CHANGE.store(true, Relaxed);
+        let _check = SwitchOn::set(&gas::CHECK_AFTER_CHANGE);
         let gathered_before = gas::GATHERED_EARLY.load(Relaxed);
         let integrators =
             [Integrator::ExplicitEuler, Integrator::SymplecticEuler, Integrator::ImplicitEuler, Integrator::Xpbd];
@@ -2150,16 +2158,7 @@ mod tests {
     /// one thread and two, and with XPBD.
     #[test]
     fn gathering_the_pieces_without_gas_changes_no_bit() {
-        use std::sync::atomic::Ordering::Relaxed;
         let _alone = gas::GATHERING_TESTS.lock().unwrap_or_else(|e| e.into_inner());
-        // Gathering on again when this test ends, also by a panic.
-        struct GatherAgain;
-        impl Drop for GatherAgain {
-            fn drop(&mut self) {
-                gas::KEEP_EVERY_FRAGMENT.store(false, Relaxed);
-            }
-        }
-        let _again = GatherAgain;
         // Per step: positions, velocities, the stats' volume, pressure and CG iterations, and
         // per piece (the body's fragment) its gas.
         type Run = Vec<(Vec<u32>, f64, f64, u64, Vec<[u64; 5]>)>;
@@ -2190,9 +2189,10 @@ mod tests {
             [(Integrator::ImplicitEuler, 1), (Integrator::ImplicitEuler, 2), (Integrator::Xpbd, 1)]
         {
             let gathered = run(integrator, threads);
-            gas::KEEP_EVERY_FRAGMENT.store(true, Relaxed);
-            let kept = run(integrator, threads);
-            gas::KEEP_EVERY_FRAGMENT.store(false, Relaxed);
+            let kept = {
+                let _keep_every = SwitchOn::set(&gas::KEEP_EVERY_FRAGMENT);
+                run(integrator, threads)
+            };
             let pieces = gathered.last().unwrap().4.len();
             assert!(pieces > 100, "{integrator:?}: only {pieces} pieces");
             for (step, (a, b)) in gathered.iter().zip(&kept).enumerate() {
