@@ -337,7 +337,9 @@ impl Topology {
             non_manifold
         };
         let marks = &mut spare.marks;
-        let loops = || self.updated_boundary_loops(triangles, &again, old_loops, marks);
+        // (Not even tried where the old loops were no cycles.)
+        let loops =
+            || old_loops_are_cycles.then(|| self.updated_boundary_loops(triangles, &again, old_loops, marks)).flatten();
         let (non_manifold, loops) = match pool {
             Some(pool) => pool.join(fans, loops),
             None => (fans(), loops()),
@@ -345,7 +347,7 @@ impl Topology {
         // The loops found from the old ones hold only where every vertex has one fan, before
         // and after (see `updated_boundary_loops`); else all of them are found again.
         self.boundary_loops = match loops {
-            Some(loops) if non_manifold.is_empty() && old_loops_are_cycles => loops,
+            Some(loops) if non_manifold.is_empty() => loops,
             _ => self.boundary_loops_of(triangles),
         };
         self.non_manifold_vertices = non_manifold;
@@ -423,13 +425,8 @@ impl Topology {
                 continue; // on a loop walked already
             }
             marks[start as usize] = false;
-            match boundary_at(start) {
-                (0, 0, _) => continue, // not on the boundary
-                (1, 1, _) => {}
-                _ => {
-                    consistent = false;
-                    break 'walks;
-                }
+            if let (0, 0, _) = boundary_at(start) {
+                continue; // not on the boundary (the walk checks the rest)
             }
             let mut ring = vec![start];
             let mut v = start;
