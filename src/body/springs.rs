@@ -20,6 +20,11 @@ pub(crate) struct Springs {
     /// so that what is laid out from it (the implicit integrator's coupling slices) is laid out
     /// again only when it changes.
     pub adjacency_id: u64,
+    /// Per spring, true where its edge is the side of one face only (a cloth's border, a side
+    /// of an opened crack): such a spring never breaks (a crack parts two faces), so the
+    /// fracture check skips it. Made by a rebuild after a topology change, empty before the
+    /// first (and in a body that cannot crack); every spring may break where it is empty.
+    pub one_face: Vec<bool>,
 }
 
 impl Springs {
@@ -102,6 +107,13 @@ impl Springs {
             + self.rest.capacity() * 4
             + self.offsets.capacity() * 4
             + self.adjacency.capacity() * 8
+            + self.one_face.capacity()
+    }
+
+    /// Whether spring `k` joins two faces (see [`Springs::one_face`]), so may break.
+    #[inline]
+    pub fn may_break(&self, k: usize) -> bool {
+        !self.one_face.get(k).copied().unwrap_or(false)
     }
 }
 

@@ -296,8 +296,12 @@ pub(crate) fn rebuild_springs(
     // their own (one loop pushing both took 0.37 ms of the issue-5 balloon's first cracking
     // step, 30k springs; a fracture phase there is about as long as a plain step).
     let mut from = 0;
+    springs.one_face.clear();
     for &e in broken.iter().chain(std::iter::once(&(topology.edges.len() as u32))) {
         springs.ends.extend_from_slice(&topology.edges[from..e as usize]);
+        if fracture.is_some() {
+            springs.one_face.extend(topology.edge_face_count[from..e as usize].iter().map(|&c| c < 2));
+        }
         from = e as usize + 1;
     }
     springs.rest.extend(springs.ends.iter().map(|&[a, b]| (rest[b as usize] - rest[a as usize]).length()));
@@ -447,11 +451,18 @@ mod tests {
             let springs = build_springs(&topology, Some(&fracture), &rest);
             let reused = rebuild_springs(&topology, Some(&fracture), &rest, std::mem::take(&mut previous));
             assert_eq!(
-                (&reused.ends, &reused.rest, &reused.offsets, &reused.adjacency),
-                (&springs.ends, &springs.rest, &springs.offsets, &springs.adjacency),
+                (&reused.ends, &reused.rest, &reused.offsets, &reused.adjacency, &reused.one_face),
+                (&springs.ends, &springs.rest, &springs.offsets, &springs.adjacency, &springs.one_face),
                 "round {round}"
             );
             previous = reused;
+            // The fracture check skips exactly the springs on edges of one face (non-manifold
+            // edges, of three faces here, may break).
+            assert_eq!(springs.one_face.len(), springs.ends.len(), "round {round}");
+            for (k, ends) in springs.ends.iter().enumerate() {
+                let e = topology.edges.binary_search(ends).unwrap();
+                assert_eq!(springs.may_break(k), topology.edge_face_count[e] >= 2, "round {round}: spring {k}");
+            }
             let expected: Vec<[u32; 2]> = (0..topology.edges.len() as u32)
                 .filter(|&e| !edge_is_broken(&topology, Some(&fracture), e))
                 .map(|e| topology.edges[e as usize])
@@ -480,6 +491,10 @@ mod tests {
         }
         assert!(opened_sides > 20, "only {opened_sides} sides had rest lengths of their own");
         assert!(border_bits > 0, "no round marked a border side broken");
-        assert_eq!(build_springs(&topology, None, &rest).ends, topology.edges);
+        let without_fracture = build_springs(&topology, None, &rest);
+        assert_eq!(without_fracture.ends, topology.edges);
+        // No fracture bookkeeping, no flags: every spring may break.
+        assert!(without_fracture.one_face.is_empty());
+        assert!((0..without_fracture.len()).all(|k| without_fracture.may_break(k)));
     }
 }
