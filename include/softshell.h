@@ -189,9 +189,10 @@ typedef uint32_t SoftshellStatus;
 //
 // Created by `softshell_body_new`, destroyed by `softshell_body_free`. Functions:
 // `softshell_body_add_sphere_obstacle`, `_add_plane_obstacle`, `_pin_vertex`,
-// `_apply_impulse`, `_break_edge`, `_step`, `_topology_generation`, `_vertex_count`,
-// `_triangle_count`, `_fragment_count`, `_copy_positions`, `_copy_velocities`, `_copy_masses`,
-// `_copy_triangles`, `_copy_vertex_origins`, `_copy_fragment_ids`, `_memory_bytes`.
+// `_apply_impulse`, `_break_edge`, `_break_edges`, `_step`, `_topology_generation`,
+// `_vertex_count`, `_triangle_count`, `_fragment_count`, `_copy_positions`, `_copy_velocities`,
+// `_copy_masses`, `_copy_triangles`, `_copy_vertex_origins`, `_copy_fragment_ids`,
+// `_memory_bytes`, `_save_ply`, `_save_obj`.
 //
 // Fracture appends vertices and rewrites triangles: vertex indices are stable (survivors are
 // never renumbered), but the counts change, so re-query buffer sizes whenever
@@ -606,7 +607,9 @@ struct SoftshellBodyDef softshell_body_def_default(void);
 //
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL pointer, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
 // for a def not made by `softshell_body_def_default` or a field out of range (the message names
-// it), `SOFTSHELL_STATUS_INVALID_MESH` when the mesh does not suit (with gas: not closed,
+// it), for a `total_mass` that gives a vertex with faces a mass below the smallest normal float
+// (1.18e-38 kg: a tiny total on a mesh of slivers), and with `ground` for a mesh whose free
+// vertices are all below the ground, `SOFTSHELL_STATUS_INVALID_MESH` when the mesh does not suit (with gas: not closed,
 // manifold and outward, every connected piece on its own; always: a triangle with a repeated
 // corner or an edge of zero length),
 // `SOFTSHELL_STATUS_UNSUPPORTED` when built without the `body` feature. On success
@@ -630,8 +633,9 @@ void softshell_body_free(struct SoftshellBody *body);
 // kept outside it with the def's restitution and friction. Free vertices inside it when it is
 // added move to its surface at once, their velocity into it removed; the energy drift goes on
 // from where it was (the move is not counted as work).
-// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius not > 0, and
-// (adding nothing) when every free vertex of the body is inside the sphere.
+// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius outside
+// [1.18e-38, 1e9] m (the smallest normal float to 1e9), and (adding nothing) when every free
+// vertex of the body is inside the sphere.
 //
 // # Safety
 // `body` must be NULL or a live body; `center` NULL or three readable floats.
@@ -640,11 +644,12 @@ SoftshellStatus softshell_body_add_sphere_obstacle(struct SoftshellBody *body,
                                                    float radius);
 
 // Adds a half-space obstacle: the plane through `point` (float[3], m) with `normal` (float[3],
-// any non-zero length, pointing to the free side); vertices are kept on the normal's side.
+// any finite length above 1e-12, pointing to the free side); vertices are kept on the normal's
+// side.
 // Free vertices behind it when it is added move onto the plane at once, their velocity into it
 // removed; the energy drift goes on from where it was (the move is not counted as work).
-// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a zero normal, and
-// (adding nothing) when every free vertex of the body is behind the plane.
+// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a normal of length 1e-12
+// or less, and (adding nothing) when every free vertex of the body is behind the plane.
 //
 // # Safety
 // `body` must be NULL or a live body; `point` and `normal` NULL or three readable floats each.
@@ -660,8 +665,10 @@ SoftshellStatus softshell_body_add_plane_obstacle(struct SoftshellBody *body,
 SoftshellStatus softshell_body_pin_vertex(struct SoftshellBody *body, uint32_t vertex);
 
 // Applies `impulse` (float[3], N s) to vertex `vertex`: its velocity changes by impulse/mass
-// (a pinned vertex ignores it). Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an index out of
-// range or a non-finite impulse.
+// (a pinned vertex ignores it). Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT`, changing nothing,
+// for an index out of range, an impulse component that is not finite or beyond ±1e12 N s, or
+// an impulse that would give the vertex a velocity beyond ±1e12 m/s on an axis (a light
+// vertex).
 //
 // # Safety
 // `body` must be NULL or a live body; `impulse` NULL or three readable floats.
@@ -704,7 +711,7 @@ SoftshellStatus softshell_body_break_edges(struct SoftshellBody *body,
 // blocks). Writes what happened into `*out_stats` when it is not NULL.
 //
 // Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a NaN, or energy growing without a
-// source: in one step, or, with the explicit integrators, over many steps beyond what the body
+// source: in one step, or, with every integrator but XPBD, over many steps beyond what the body
 // was given): the state is rolled back to before the step, `*out_stats` is not written, and the
 // message gives the largest stable time step it estimates.
 //
@@ -1331,7 +1338,8 @@ size_t softshell_shell_memory_bytes(const struct SoftshellShell *shell);
 // the paper's Fig. 8 and 10. Overwrites an existing file.
 //
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL shell or path,
-// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by` or an empty path,
+// `SOFTSHELL_STATUS_IO` when the
 // file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` feature. The shell
 // is not changed.
 //
@@ -1343,8 +1351,9 @@ SoftshellStatus softshell_shell_save_ply(const struct SoftshellShell *shell,
 
 // Writes the shell's current shape as a Wavefront OBJ file (1-based `f a b c` lines, the
 // mesh's triangles): one file per frame makes a sequence that Blender and MeshLab import.
-// Overwrites an existing file. Returns `SOFTSHELL_STATUS_IO` when the file cannot be written,
-// `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` or `obj` feature.
+// Overwrites an existing file. Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL shell or path,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an empty path, `SOFTSHELL_STATUS_IO` when the file
+// cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` or `obj` feature.
 //
 // # Safety
 // `shell` must be NULL or a live shell; `path` NULL or a NUL-terminated string.
@@ -1360,7 +1369,8 @@ SoftshellStatus softshell_shell_save_obj(const struct SoftshellShell *shell, con
 // Overwrites an existing file.
 //
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL body or path,
-// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by` or an empty path,
+// `SOFTSHELL_STATUS_IO` when the
 // file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `body` feature. The body is
 // not changed.
 //
@@ -1372,8 +1382,9 @@ SoftshellStatus softshell_body_save_ply(const struct SoftshellBody *body,
 
 // Writes the body's current surface as a Wavefront OBJ file (every piece; vertex k is vertex k
 // of `softshell_body_copy_positions`). Overwrites an existing file. Returns
-// `SOFTSHELL_STATUS_IO` when the file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without
-// the `body` or `obj` feature.
+// `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL body or path, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
+// for an empty path, `SOFTSHELL_STATUS_IO` when the file cannot be written,
+// `SOFTSHELL_STATUS_UNSUPPORTED` without the `body` or `obj` feature.
 //
 // # Safety
 // `body` must be NULL or a live body; `path` NULL or a NUL-terminated string.
@@ -1386,7 +1397,8 @@ SoftshellStatus softshell_body_save_obj(const struct SoftshellBody *body, const 
 // `_GOAL_DISTANCE`). Computing the goals costs about one step. Overwrites an existing file.
 //
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL lattice or path,
-// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by` or an empty path,
+// `SOFTSHELL_STATUS_IO` when the
 // file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `lattice` feature. The
 // lattice is not changed.
 //
@@ -1398,8 +1410,9 @@ SoftshellStatus softshell_lattice_save_ply(const struct SoftshellLattice *lattic
 
 // Writes the lattice's current sheet (its triangulated grid, as
 // `softshell_lattice_copy_triangles`) as a Wavefront OBJ file. Overwrites an existing file.
-// Returns `SOFTSHELL_STATUS_IO` when the file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED`
-// without the `lattice` or `obj` feature.
+// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL lattice or path,
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an empty path, `SOFTSHELL_STATUS_IO` when the file
+// cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `lattice` or `obj` feature.
 //
 // # Safety
 // `lattice` must be NULL or a live lattice; `path` NULL or a NUL-terminated string.

@@ -372,3 +372,77 @@ fn two_disjoint_balls_bit_identical_across_threads() {
     assert_eq!(one, run_on_ground(&q, &u, 2, 20));
     assert_eq!(one, run_on_ground(&q, &u, 3, 20));
 }
+
+/// A big face and a sliver beside it (legs 10 m and 1e-15 m): both pass the mesh checks, and the
+/// sliver's corners get about 1e-32 of the mass.
+fn big_face_and_sliver() -> (Vec<f32>, Vec<u32>) {
+    let positions = vec![
+        0.0, 0.0, 0.0, 10.0, 0.0, 0.0, 0.0, 10.0, 0.0, //
+        0.0, 0.0, 1e-6, 1e-15, 0.0, 1e-6, 0.0, 1e-15, 1e-6,
+    ];
+    (positions, vec![0, 1, 2, 3, 4, 5])
+}
+
+/// An impulse that would give a light vertex a velocity beyond ±1e12 m/s on an axis (infinite
+/// in f32 for this one: every step after it diverged back to that state) is refused with
+/// INVALID_ARGUMENT and a message naming the vertex's mass, and nothing changes; a smaller one
+/// on the same vertex is taken, and the body steps on (found by review).
+#[test]
+fn an_impulse_that_would_make_a_velocity_too_large_is_refused() {
+    let (positions, triangles) = big_face_and_sliver();
+    let mut def = softshell_body_def_default();
+    def.gas_amount = 0.0;
+    let b = body(&positions, &triangles, &def);
+    let before = snapshot(&b);
+    // SAFETY: live body, three floats.
+    let status = unsafe { softshell_body_apply_impulse(b.0, 3, [1e12f32, 0.0, 0.0].as_ptr()) };
+    assert_eq!(status, SoftshellStatus::InvalidArgument);
+    let message = last_error();
+    assert!(message.contains("vertex 3") && message.contains("mass"), "{message}");
+    let after = snapshot(&b);
+    assert_eq!(after.velocities, before.velocities, "a refused impulse changed a velocity");
+    let mass = after.masses[3];
+    // 1 m/s on that vertex.
+    // SAFETY: as above.
+    let status = unsafe { softshell_body_apply_impulse(b.0, 3, [mass, 0.0, 0.0].as_ptr()) };
+    assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+    let v = snapshot(&b).velocities;
+    assert!((v[9] - 1.0).abs() < 1e-5, "{:?}", &v[9..12]);
+    assert!(v.iter().all(|c| c.is_finite()));
+}
+
+/// A `total_mass` that gives a vertex with faces a mass below the smallest normal float is
+/// refused when the body is made (such a body was accepted and every step of it diverged), with
+/// INVALID_ARGUMENT and a message naming the vertex and what to change; the same mesh with a
+/// mass of 1 kg is accepted and steps (found by review).
+#[test]
+fn a_total_mass_too_small_for_a_vertex_is_refused() {
+    let (positions, triangles) = big_face_and_sliver();
+    let mut def = softshell_body_def_default();
+    def.gas_amount = 0.0;
+    def.total_mass = 1e-12;
+    let Err((status, message)) = try_body(&positions, &triangles, &def) else {
+        panic!("a body whose sliver corners get a subnormal mass was accepted");
+    };
+    assert_eq!(status, SoftshellStatus::InvalidArgument, "{message}");
+    assert!(message.contains("total_mass") && message.contains("vertex"), "{message}");
+    def.total_mass = 1.0;
+    let b = body(&positions, &triangles, &def);
+    assert!(snapshot(&b).masses.iter().all(|&m| m.is_normal()));
+}
+
+/// The plane's normal: refused at a length of 1e-12 or less, with a message that says so
+/// (it said "non-zero" of a non-zero normal), taken just above.
+#[test]
+fn a_plane_normal_is_refused_only_at_the_documented_length() {
+    let (positions, triangles) = icosphere(1, 0.5);
+    let b = body(&positions, &triangles, &softshell_body_def_default());
+    let point = [0.0f32, -2.0, 0.0];
+    // SAFETY: live body, three floats each.
+    let status = unsafe { softshell_body_add_plane_obstacle(b.0, point.as_ptr(), [0.0f32, 1e-13, 0.0].as_ptr()) };
+    assert_eq!(status, SoftshellStatus::InvalidArgument);
+    assert!(last_error().contains("above 1e-12"), "{}", last_error());
+    // SAFETY: as above.
+    let status = unsafe { softshell_body_add_plane_obstacle(b.0, point.as_ptr(), [0.0f32, 1e-11, 0.0].as_ptr()) };
+    assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+}

@@ -722,6 +722,35 @@ fn a_cut_along_a_border_is_refused_and_changes_nothing() {
     step(&b);
 }
 
+/// An edge of three faces (a non-manifold input, which a body without gas accepts) that nobody
+/// broke holds its faces together at its ends: a cut through one of its ends elsewhere leaves
+/// it whole (each face on it was once a fan of its own there, and the first crack at the vertex
+/// opened it: found by review). Cutting the edge itself parts all three.
+#[test]
+fn a_cut_through_an_end_of_a_non_manifold_edge_leaves_the_edge_whole() {
+    // Three faces on edge (0, 1); the first and the fourth share edge (1, 2).
+    let positions = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.5, 1.0, 0.0, 0.5, -1.0, 0.0, 0.5, 0.0, 1.0, 1.0, 1.0, 0.0];
+    let triangles = [0u32, 1, 2, 1, 0, 3, 0, 1, 4, 2, 1, 5];
+    let mut def = softshell_body_def_default();
+    def.gas_amount = 0.0;
+    let b = body(&positions, &triangles, &def);
+    // SAFETY: live body.
+    assert_eq!(unsafe { softshell_body_break_edge(b.0, 1, 2) }, SoftshellStatus::Ok, "{}", last_error());
+    let cut = snapshot(&b);
+    // Both ends split once: at 1 the fourth face parts from the three on (0, 1), at 2 the
+    // first face from the fourth.
+    assert_eq!(cut.vertex_count(), 8, "triangles {:?}", cut.triangles);
+    assert_eq!(faces_of_edge(&cut.triangles, (0, 1)), 3, "triangles {:?}", cut.triangles);
+    assert_eq!(faces_of_edge(&cut.triangles, (1, 2)), 1, "the cut edge opened: {:?}", cut.triangles);
+    step(&b);
+    // SAFETY: live body.
+    assert_eq!(unsafe { softshell_body_break_edge(b.0, 0, 1) }, SoftshellStatus::Ok, "{}", last_error());
+    let parted = snapshot(&b);
+    assert_eq!(faces_of_edge(&parted.triangles, (0, 1)), 1, "triangles {:?}", parted.triangles);
+    assert!(parted.vertex_count() > cut.vertex_count());
+    step(&b);
+}
+
 /// A spring on a border does not break: a cloth's corner (one face, two border springs), the
 /// rest pinned, thrown away stretches its two springs far past `break_strain`; nothing cracks,
 /// and the generation and the counts stay.

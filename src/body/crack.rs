@@ -26,6 +26,15 @@ pub(crate) fn mark_broken(fracture: &mut Fracture, topology: &Topology, edges: &
     }
 }
 
+/// Whether edge `e` is marked broken on one of its first two faces (those `mark_broken` marks;
+/// as `surface::edge_is_broken` counts it).
+fn edge_marked_broken(fracture: &Fracture, topology: &Topology, e: u32) -> bool {
+    topology.edge_faces[e as usize]
+        .iter()
+        .filter(|&&g| g != NO_FACE)
+        .any(|&g| side_of(topology, g, e).is_some_and(|side| fracture.is_broken(g, side)))
+}
+
 fn find(parent: &mut [u32], mut i: u32) -> u32 {
     while parent[i as usize] != i {
         parent[i as usize] = parent[parent[i as usize] as usize];
@@ -56,20 +65,30 @@ pub(crate) fn fan_labels(
                 continue;
             }
             let e = topology.face_edges[f as usize][side];
-            if e == u32::MAX || topology.edge_face_count[e as usize] != 2 || fracture.is_broken(f, side) {
+            if e == u32::MAX || topology.edge_face_count[e as usize] < 2 || edge_marked_broken(fracture, topology, e) {
                 continue;
             }
-            let [f0, f1] = topology.edge_faces[e as usize];
-            let other = if f0 == f { f1 } else { f0 };
-            if let Some(other_side) = side_of(topology, other, e) {
-                if fracture.is_broken(other, other_side) {
-                    continue;
-                }
-            }
-            if let Some(j) = faces.iter().position(|&g| g == other) {
+            let mut join = |j: usize| {
                 let (a, b) = (find(parent, i as u32), find(parent, j as u32));
                 if a != b {
                     parent[a.max(b) as usize] = a.min(b);
+                }
+            };
+            if topology.edge_face_count[e as usize] == 2 {
+                let [f0, f1] = topology.edge_faces[e as usize];
+                let other = if f0 == f { f1 } else { f0 };
+                if let Some(j) = faces.iter().position(|&g| g == other) {
+                    join(j);
+                }
+            } else {
+                // An unbroken edge of three or more faces (a non-manifold input) holds all of
+                // them together at its ends: a crack elsewhere through the vertex must not
+                // part them (each page was a fan of its own, and the first crack there opened
+                // an edge nobody broke: found by review).
+                for (j, &g) in faces.iter().enumerate() {
+                    if g != f && topology.face_edges[g as usize].contains(&e) {
+                        join(j);
+                    }
                 }
             }
         }
@@ -188,7 +207,8 @@ mod tests {
     use glam::Vec3;
 
     /// The fans of `v` by flood fill: its faces, joined through a side at `v` whose edge has
-    /// two faces and is broken on neither; each fan sorted, in order of its first face.
+    /// two or more faces and is not broken (`edge_is_broken`), to every other face of `v` on
+    /// that edge; each fan sorted, in order of its first face.
     fn flood_fans(fracture: &Fracture, topology: &Topology, triangles: &[[u32; 3]], v: u32) -> Vec<Vec<u32>> {
         let faces = topology.faces_of_vertex(v);
         let mut fan = vec![usize::MAX; faces.len()];
@@ -209,16 +229,15 @@ mod tests {
                     let e = topology.face_edges[f as usize][side];
                     if (t[side] != v && t[(side + 1) % 3] != v)
                         || e == u32::MAX
-                        || topology.edge_face_count[e as usize] != 2
+                        || crate::body::surface::edge_is_broken(topology, Some(fracture), e)
                     {
                         continue;
                     }
-                    let [f0, f1] = topology.edge_faces[e as usize];
-                    let other = if f0 == f { f1 } else { f0 };
-                    let broken = fracture.is_broken(f, side)
-                        || side_of(topology, other, e).is_some_and(|s| fracture.is_broken(other, s));
-                    if let Some(j) = faces.iter().position(|&g| g == other).filter(|_| !broken) {
-                        if fan[j] == usize::MAX {
+                    let (a, b) = (t[side], t[(side + 1) % 3]);
+                    for (j, &g) in faces.iter().enumerate() {
+                        let u = triangles[g as usize];
+                        let on_edge = g != f && u.contains(&a) && u.contains(&b);
+                        if on_edge && fan[j] == usize::MAX {
                             fan[j] = k;
                             stack.push(j);
                         }

@@ -221,6 +221,9 @@ const IMPLICIT_DRIFT_LIMIT: f64 = 20.0;
 /// "gains" (2e-7 J, then 2e-6 J: 7 times more) that the ratio alone took for divergence.
 const EXCESS_NOISE: f64 = 1e-5;
 
+/// The largest velocity component (m/s) an impulse may give a vertex.
+pub(crate) const MAX_SPEED: f32 = 1e12;
+
 /// Prints how long a phase of the fracture took when SOFTSHELL_TRACE_FRACTURE is set (a
 /// measuring aid for the benchmarks; off by default).
 fn trace_phase(what: &str, started: Instant) {
@@ -285,6 +288,19 @@ impl Body {
             return Err(Error::invalid_mesh("a soft body needs a mesh with a surface area above zero"));
         }
         let mass: Vec<f32> = lumped.iter().map(|&a| (settings.total_mass as f64 * a / area) as f32).collect();
+        // A vertex with faces gets a mass that f32 holds with its precision (a subnormal one,
+        // or 0, had an infinite inverse or none: such a body accepted could not take a step).
+        if let Some(k) = (0..n).find(|&k| lumped[k] > 0.0 && !mass[k].is_normal()) {
+            return Err(Error::invalid_argument(format!(
+                "total_mass {:e} kg spread by area gives vertex {} a mass of {:e} kg (its faces hold {:e} of the \
+                 area), below the smallest normal float {:e}: raise total_mass or remove the sliver faces around it",
+                settings.total_mass,
+                order.external(k),
+                settings.total_mass as f64 * lumped[k] / area,
+                lumped[k] / area,
+                f32::MIN_POSITIVE
+            )));
+        }
         let inv_mass = mass.iter().map(|&m| if m > 0.0 { 1.0 / m } else { 0.0 }).collect();
         let mut nodes = Nodes { v: vec![Vec3::ZERO; n], rest: x.clone(), x, mass, inv_mass };
         let mut springs = build_springs(topology, None, &nodes.rest);
@@ -540,10 +556,21 @@ impl Body {
 
     /// Adds `impulse / m` to a vertex's velocity (no effect on a pinned vertex); its kinetic
     /// energy counts as external work.
+    /// Refused, and nothing changed, where the velocity would leave ±[`MAX_SPEED`] on an axis
+    /// (a light vertex given a large impulse: infinite in f32 before, and every step after it
+    /// diverged back to that state).
     pub fn apply_impulse(&mut self, vertex: u32, impulse: Vec3) -> Result<()> {
         let i = self.check_vertex(vertex, "vertex")?;
+        let velocity = self.nodes.v[i] + impulse * self.nodes.inv_mass[i];
+        if !velocity.is_finite() || velocity.abs().max_element() > MAX_SPEED {
+            return Err(Error::invalid_argument(format!(
+                "an impulse of {impulse} N s gives vertex {vertex} (mass {:e} kg) a velocity of {velocity} m/s, \
+                 beyond ±{MAX_SPEED:e} m/s on an axis: give it a smaller impulse",
+                self.nodes.mass[i]
+            )));
+        }
         let before = energy::kinetic(&self.nodes.mass[i..=i], &self.nodes.v[i..=i]);
-        self.nodes.v[i] += impulse * self.nodes.inv_mass[i];
+        self.nodes.v[i] = velocity;
         self.external_work += energy::kinetic(&self.nodes.mass[i..=i], &self.nodes.v[i..=i]) - before;
         self.energy_now = None;
         Ok(())

@@ -205,9 +205,10 @@ impl From<&BodyStats> for SoftshellBodyStats {
 ///
 /// Created by `softshell_body_new`, destroyed by `softshell_body_free`. Functions:
 /// `softshell_body_add_sphere_obstacle`, `_add_plane_obstacle`, `_pin_vertex`,
-/// `_apply_impulse`, `_break_edge`, `_step`, `_topology_generation`, `_vertex_count`,
-/// `_triangle_count`, `_fragment_count`, `_copy_positions`, `_copy_velocities`, `_copy_masses`,
-/// `_copy_triangles`, `_copy_vertex_origins`, `_copy_fragment_ids`, `_memory_bytes`.
+/// `_apply_impulse`, `_break_edge`, `_break_edges`, `_step`, `_topology_generation`,
+/// `_vertex_count`, `_triangle_count`, `_fragment_count`, `_copy_positions`, `_copy_velocities`,
+/// `_copy_masses`, `_copy_triangles`, `_copy_vertex_origins`, `_copy_fragment_ids`,
+/// `_memory_bytes`, `_save_ply`, `_save_obj`.
 ///
 /// Fracture appends vertices and rewrites triangles: vertex indices are stable (survivors are
 /// never renumbered), but the counts change, so re-query buffer sizes whenever
@@ -368,7 +369,9 @@ fn settings_of(def: &SoftshellBodyDef) -> BodySettings {
 ///
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL pointer, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
 /// for a def not made by `softshell_body_def_default` or a field out of range (the message names
-/// it), `SOFTSHELL_STATUS_INVALID_MESH` when the mesh does not suit (with gas: not closed,
+/// it), for a `total_mass` that gives a vertex with faces a mass below the smallest normal float
+/// (1.18e-38 kg: a tiny total on a mesh of slivers), and with `ground` for a mesh whose free
+/// vertices are all below the ground, `SOFTSHELL_STATUS_INVALID_MESH` when the mesh does not suit (with gas: not closed,
 /// manifold and outward, every connected piece on its own; always: a triangle with a repeated
 /// corner or an edge of zero length),
 /// `SOFTSHELL_STATUS_UNSUPPORTED` when built without the `body` feature. On success
@@ -425,8 +428,9 @@ pub unsafe extern "C" fn softshell_body_free(body: *mut SoftshellBody) {
 /// kept outside it with the def's restitution and friction. Free vertices inside it when it is
 /// added move to its surface at once, their velocity into it removed; the energy drift goes on
 /// from where it was (the move is not counted as work).
-/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius not > 0, and
-/// (adding nothing) when every free vertex of the body is inside the sphere.
+/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a non-finite centre or a radius outside
+/// [1.18e-38, 1e9] m (the smallest normal float to 1e9), and (adding nothing) when every free
+/// vertex of the body is inside the sphere.
 ///
 /// # Safety
 /// `body` must be NULL or a live body; `center` NULL or three readable floats.
@@ -453,11 +457,12 @@ pub unsafe extern "C" fn softshell_body_add_sphere_obstacle(
 }
 
 /// Adds a half-space obstacle: the plane through `point` (float[3], m) with `normal` (float[3],
-/// any non-zero length, pointing to the free side); vertices are kept on the normal's side.
+/// any finite length above 1e-12, pointing to the free side); vertices are kept on the normal's
+/// side.
 /// Free vertices behind it when it is added move onto the plane at once, their velocity into it
 /// removed; the energy drift goes on from where it was (the move is not counted as work).
-/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a zero normal, and
-/// (adding nothing) when every free vertex of the body is behind the plane.
+/// Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for non-finite values or a normal of length 1e-12
+/// or less, and (adding nothing) when every free vertex of the body is behind the plane.
 ///
 /// # Safety
 /// `body` must be NULL or a live body; `point` and `normal` NULL or three readable floats each.
@@ -475,7 +480,7 @@ pub unsafe extern "C" fn softshell_body_add_plane_obstacle(
         let length = (normal[0] as f64).hypot(normal[1] as f64).hypot(normal[2] as f64);
         if length.is_nan() || length <= 1e-12 || !length.is_finite() {
             return Err(Error::invalid_argument(format!(
-                "`normal` = ({}, {}, {}) must have a non-zero finite length",
+                "`normal` = ({}, {}, {}) must have a finite length above 1e-12",
                 normal[0], normal[1], normal[2]
             )));
         }
@@ -513,8 +518,10 @@ pub unsafe extern "C" fn softshell_body_pin_vertex(body: *mut SoftshellBody, ver
 }
 
 /// Applies `impulse` (float[3], N s) to vertex `vertex`: its velocity changes by impulse/mass
-/// (a pinned vertex ignores it). Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an index out of
-/// range or a non-finite impulse.
+/// (a pinned vertex ignores it). Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT`, changing nothing,
+/// for an index out of range, an impulse component that is not finite or beyond ±1e12 N s, or
+/// an impulse that would give the vertex a velocity beyond ±1e12 m/s on an axis (a light
+/// vertex).
 ///
 /// # Safety
 /// `body` must be NULL or a live body; `impulse` NULL or three readable floats.
@@ -616,7 +623,7 @@ pub unsafe extern "C" fn softshell_body_break_edges(
 /// blocks). Writes what happened into `*out_stats` when it is not NULL.
 ///
 /// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a NaN, or energy growing without a
-/// source: in one step, or, with the explicit integrators, over many steps beyond what the body
+/// source: in one step, or, with every integrator but XPBD, over many steps beyond what the body
 /// was given): the state is rolled back to before the step, `*out_stats` is not written, and the
 /// message gives the largest stable time step it estimates.
 ///

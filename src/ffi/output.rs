@@ -87,7 +87,8 @@ fn write_obj(_positions: &[Vec3], _triangles: &[[u32; 3]], _path: &Path) -> Resu
 /// the paper's Fig. 8 and 10. Overwrites an existing file.
 ///
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL shell or path,
-/// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+/// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by` or an empty path,
+/// `SOFTSHELL_STATUS_IO` when the
 /// file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` feature. The shell
 /// is not changed.
 ///
@@ -138,8 +139,9 @@ pub unsafe extern "C" fn softshell_shell_save_ply(
 
 /// Writes the shell's current shape as a Wavefront OBJ file (1-based `f a b c` lines, the
 /// mesh's triangles): one file per frame makes a sequence that Blender and MeshLab import.
-/// Overwrites an existing file. Returns `SOFTSHELL_STATUS_IO` when the file cannot be written,
-/// `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` or `obj` feature.
+/// Overwrites an existing file. Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL shell or path,
+/// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an empty path, `SOFTSHELL_STATUS_IO` when the file
+/// cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `shell` or `obj` feature.
 ///
 /// # Safety
 /// `shell` must be NULL or a live shell; `path` NULL or a NUL-terminated string.
@@ -176,7 +178,8 @@ pub unsafe extern "C" fn softshell_shell_save_obj(
 /// Overwrites an existing file.
 ///
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL body or path,
-/// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+/// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by` or an empty path,
+/// `SOFTSHELL_STATUS_IO` when the
 /// file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `body` feature. The body is
 /// not changed.
 ///
@@ -228,8 +231,9 @@ pub unsafe extern "C" fn softshell_body_save_ply(
 
 /// Writes the body's current surface as a Wavefront OBJ file (every piece; vertex k is vertex k
 /// of `softshell_body_copy_positions`). Overwrites an existing file. Returns
-/// `SOFTSHELL_STATUS_IO` when the file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without
-/// the `body` or `obj` feature.
+/// `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL body or path, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
+/// for an empty path, `SOFTSHELL_STATUS_IO` when the file cannot be written,
+/// `SOFTSHELL_STATUS_UNSUPPORTED` without the `body` or `obj` feature.
 ///
 /// # Safety
 /// `body` must be NULL or a live body; `path` NULL or a NUL-terminated string.
@@ -309,7 +313,8 @@ fn to_vec3(flat: &[f32]) -> Vec<Vec3> {
 /// `_GOAL_DISTANCE`). Computing the goals costs about one step. Overwrites an existing file.
 ///
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL lattice or path,
-/// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by`, `SOFTSHELL_STATUS_IO` when the
+/// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an unknown `colour_by` or an empty path,
+/// `SOFTSHELL_STATUS_IO` when the
 /// file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `lattice` feature. The
 /// lattice is not changed.
 ///
@@ -346,8 +351,9 @@ pub unsafe extern "C" fn softshell_lattice_save_ply(
 
 /// Writes the lattice's current sheet (its triangulated grid, as
 /// `softshell_lattice_copy_triangles`) as a Wavefront OBJ file. Overwrites an existing file.
-/// Returns `SOFTSHELL_STATUS_IO` when the file cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED`
-/// without the `lattice` or `obj` feature.
+/// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL lattice or path,
+/// `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an empty path, `SOFTSHELL_STATUS_IO` when the file
+/// cannot be written, `SOFTSHELL_STATUS_UNSUPPORTED` without the `lattice` or `obj` feature.
 ///
 /// # Safety
 /// `lattice` must be NULL or a live lattice; `path` NULL or a NUL-terminated string.
