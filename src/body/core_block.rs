@@ -76,7 +76,8 @@ fn face_area(nodes: &Nodes, t: [u32; 3]) -> f64 {
 
 /// Cuts out the core block of node `v` (see the module doc). `touched` marks vertices whose
 /// neighbourhood changed earlier in this pass (their `topology` entries are stale): a node whose
-/// fan touches one is skipped. Returns true when a block was released.
+/// fan touches one is skipped, as is one with a ring vertex that has no face outside the fan.
+/// Returns true when a block was released.
 pub(crate) fn release(
     fracture: &mut Fracture,
     topology: &Topology,
@@ -90,6 +91,12 @@ pub(crate) fn release(
     }
     let Some((ring, ring_faces)) = closed_ring(fracture, topology, triangles, v) else { return false };
     if ring.iter().any(|&u| touched[u as usize]) {
+        return false;
+    }
+    // A ring vertex with no face outside the fan (a crack split the rest of its fan away) would
+    // give all its mass to its copy in the block and stay in the patch at mass 0, an anchor
+    // nothing moves (found by review: momentum then drifted by a quarter): no block here.
+    if ring.iter().any(|&u| topology.faces_of_vertex(u).len() <= 2) {
         return false;
     }
     let k = ring.len();
