@@ -7,8 +7,8 @@
 //! block underneath; the surface left behind is closed by a cap of k faces from another new centre
 //! c over the original ring. Both pieces stay closed, manifold and oriented, every new edge is a
 //! spring with its rest length from the rest positions, and no existing vertex moves or is
-//! renumbered. Mass: u_i' takes u_i's share of the fan's rest area, c' half of v's mass (at v's
-//! velocity), c a sixth of each remaining ring mass (at their mean velocity): mass and momentum
+//! renumbered. Mass: u_i' takes u_i's share of the fan's rest area (half where the fan holds all
+//! of u_i's faces), c' half of v's mass (at v's velocity), c a sixth of each remaining ring mass (at their mean velocity): mass and momentum
 //! are conserved exactly. The gas of the body is shared between the block and the rest in
 //! proportion to their volumes, so neither pressure jumps. A block releases no block of its own,
 //! nor does the patch's centre: v keeps a closed fan in the block, whose gas pushes on it (see
@@ -76,8 +76,7 @@ fn face_area(nodes: &Nodes, t: [u32; 3]) -> f64 {
 
 /// Cuts out the core block of node `v` (see the module doc). `touched` marks vertices whose
 /// neighbourhood changed earlier in this pass (their `topology` entries are stale): a node whose
-/// fan touches one is skipped, as is one with a ring vertex that has no face outside the fan.
-/// Returns true when a block was released.
+/// fan touches one is skipped. Returns true when a block was released.
 pub(crate) fn release(
     fracture: &mut Fracture,
     topology: &Topology,
@@ -93,12 +92,6 @@ pub(crate) fn release(
     if ring.iter().any(|&u| touched[u as usize]) {
         return false;
     }
-    // A ring vertex with no face outside the fan (a crack split the rest of its fan away) would
-    // give all its mass to its copy in the block and stay in the patch at mass 0, an anchor
-    // nothing moves (found by review: momentum then drifted by a quarter): no block here.
-    if ring.iter().any(|&u| topology.faces_of_vertex(u).len() <= 2) {
-        return false;
-    }
     let k = ring.len();
     // Ring copies u_i' with the fan's share of u_i's mass.
     let mut copies = Vec::with_capacity(k);
@@ -107,7 +100,17 @@ pub(crate) fn release(
         let fan_area = face_area(nodes, triangles[ring_faces[i] as usize])
             + face_area(nodes, triangles[ring_faces[(i + k - 1) % k] as usize]);
         let total = vertex_area(nodes, topology, triangles, u);
-        let share = if total > 0.0 { (fan_area / total).clamp(0.0, 1.0) } else { 0.5 };
+        // A ring vertex with no face outside the fan (a crack split the rest of its fan away)
+        // stays in the patch's cap alone: it keeps half its mass. With its share of the area
+        // (all of it) it went to the block whole and left the vertex at mass 0, an anchor
+        // nothing moved (found by review: momentum then drifted by a quarter).
+        let share = if topology.faces_of_vertex(u).len() <= 2 {
+            0.5
+        } else if total > 0.0 {
+            (fan_area / total).clamp(0.0, 1.0)
+        } else {
+            0.5
+        };
         let m = nodes.mass[ui] as f64;
         let taken = (m * share) as f32;
         let (x, vel, rest) = (nodes.x[ui], nodes.v[ui], nodes.rest[ui]);

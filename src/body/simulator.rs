@@ -1655,6 +1655,11 @@ mod tests {
         let before_block = body.fracture.as_ref().unwrap().opened_rest.clone();
         assert_eq!(body.change_topology(&[], &[corner]), (0, 1));
         assert_eq!(body.springs.len(), edges(&body), "an edge lost its spring to the core block");
+        // The block's ring holds the crack's end copy, whose only faces were in the fan: it
+        // stays in the patch's cap with half its mass (it was left at mass 0).
+        for t in &body.triangles {
+            assert!(t.iter().all(|&u| body.nodes.mass[u as usize] > 0.0), "a face's corner at mass 0: {t:?}");
+        }
         // The block's cap takes a crack's side with its rest length; the fan face keeps its own.
         let after_block = &body.fracture.as_ref().unwrap().opened_rest;
         assert!(before_block.iter().all(|entry| after_block.contains(entry)));
