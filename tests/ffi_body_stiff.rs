@@ -395,3 +395,67 @@ fn advice_beyond_the_most_substeps_shortens_the_time_step() {
         assert!(stats.kinetic_energy.is_finite());
     }
 }
+
+/// Implicit Euler, a light ball squeezed between a sphere inside it and a plane through it at
+/// h = 1/15 s, cracking: a step that turns a few joules into 1e13 (vertices at 5e6 m/s, light
+/// copies made by the cracks under the clamped gas's forces) is rolled back and reported
+/// UNSTABLE. It passed before: the one-step test allowed what the forces could give a vertex
+/// from rest in one step, which a 1e-10 kg vertex makes 5e18 J (an allowance for the explicit
+/// integrators' first step, which implicit Euler does not take; found by review). Then the
+/// advice (more substeps) runs the scene with every step's kinetic energy bounded.
+#[test]
+fn implicit_euler_rolls_back_a_step_that_makes_energy_from_nothing() {
+    let (positions, triangles) = icosphere(2, 0.5);
+    let mut def = softshell_body_def_default();
+    def.gas_amount = 200.0;
+    def.restitution = 0.9;
+    def.friction = 1000.0;
+    def.time_step = 1.0 / 15.0;
+    def.break_strain = 0.05;
+    let squeezed = |def: &SoftshellBodyDef| {
+        let b = body(&positions, &triangles, def);
+        let (center, point, normal) = ([0.0f32, -0.2, 0.0], [0.0f32, 0.1, 0.0], [0.0f32, 1.0, 0.3]);
+        // SAFETY: live body, three floats each.
+        unsafe {
+            assert_eq!(softshell_body_add_sphere_obstacle(b.0, center.as_ptr(), 0.45), SoftshellStatus::Ok);
+            assert_eq!(softshell_body_add_plane_obstacle(b.0, point.as_ptr(), normal.as_ptr()), SoftshellStatus::Ok);
+        }
+        b
+    };
+    // The gas can give at most nRT ln(V0 / V) = 200 ln(0.52 / 1e-6) J < 3e3 J, the springs
+    // little more: 1e5 J is far above anything a step may make.
+    let bound = 1e5;
+    let b = squeezed(&def);
+    let mut message = None;
+    for k in 0..8 {
+        let before = snapshot(&b);
+        match try_step(&b) {
+            Ok(stats) => assert!(stats.kinetic_energy < bound, "step {k}: {} J accepted", stats.kinetic_energy),
+            Err((status, m)) => {
+                assert_eq!(status, SoftshellStatus::Unstable, "{m}");
+                let after = snapshot(&b);
+                assert_eq!(
+                    (after.positions, after.velocities),
+                    (before.positions, before.velocities),
+                    "not rolled back"
+                );
+                message = Some(m);
+                break;
+            }
+        }
+    }
+    let message = message.expect("the squeezed ball diverges at h = 1/15 s in one substep");
+    assert!(message.contains("kinetic energy grew"), "{message}");
+    let substeps = message
+        .split("substeps >= ")
+        .nth(1)
+        .and_then(|t| t.split([' ', ')']).next())
+        .and_then(|t| t.parse::<u32>().ok())
+        .unwrap_or_else(|| panic!("no advice: {message}"));
+    def.substeps = substeps;
+    let b = squeezed(&def);
+    for k in 0..8 {
+        let stats = try_step(&b).unwrap_or_else(|e| panic!("step {k} with substeps {substeps}: {e:?}"));
+        assert!(stats.kinetic_energy < bound, "step {k}: {} J", stats.kinetic_energy);
+    }
+}
