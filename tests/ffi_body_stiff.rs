@@ -396,6 +396,32 @@ fn advice_beyond_the_most_substeps_shortens_the_time_step() {
     }
 }
 
+/// Advice beyond every allowed step: where even 1000 substeps of the shortest `time_step`
+/// (1e-6 s) are too long, the message asks for no `time_step` the def refuses (it asked for
+/// 5.6e-7 s: found by review) but says so and names the other integrators, and implicit Euler,
+/// as named, steps the same body.
+#[test]
+fn advice_beyond_every_allowed_step_names_another_integrator() {
+    let (p, t) = icosphere(2, 0.5);
+    let mut def = softshell_body_def_default();
+    def.integrator = SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER;
+    def.spring_stiffness = 1e9;
+    def.total_mass = 1e-6;
+    def.gas_amount = 10.0;
+    def.gravity = [0.0; 3];
+    let b = body(&p, &t, &def);
+    let (status, message) = try_step(&b).expect_err("h = 1/60 s is far too long");
+    assert_eq!(status, SoftshellStatus::Unstable);
+    assert!(!message.contains("time_step <=") && !message.contains("substeps >="), "{message}");
+    assert!(message.contains("which no allowed step makes"), "{message}");
+    assert!(message.contains("SOFTSHELL_INTEGRATOR_IMPLICIT_EULER"), "{message}");
+    def.integrator = SOFTSHELL_INTEGRATOR_IMPLICIT_EULER;
+    let b = body(&p, &t, &def);
+    for k in 0..5 {
+        try_step(&b).unwrap_or_else(|(status, m)| panic!("step {k} with implicit Euler: {status:?}: {m}"));
+    }
+}
+
 /// Implicit Euler, a light ball squeezed between a sphere inside it and a plane through it at
 /// h = 1/15 s, cracking: a step that turns a few joules into 1e13 (vertices at 5e6 m/s, light
 /// copies made by the cracks under the clamped gas's forces) is rolled back and reported

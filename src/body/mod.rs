@@ -53,5 +53,5 @@ fn test_randoms(seed: u64) -> impl FnMut() -> f32 {
 }
 
 pub use obstacles::Obstacle;
-pub use settings::{BodySettings, Integrator, MAX_SUBSTEPS};
+pub use settings::{BodySettings, Integrator, MAX_SUBSTEPS, MIN_TIME_STEP};
 pub use simulator::{Body, BodyStats};

@@ -21,6 +21,9 @@ pub enum Integrator {
 /// never asks for more).
 pub const MAX_SUBSTEPS: u32 = 1000;
 
+/// The shortest step the C ABI takes, s (the advice of an UNSTABLE step never asks for less).
+pub const MIN_TIME_STEP: f32 = 1e-6;
+
 /// Settings of a [`crate::body::Body`]. Validated by the caller (the C boundary checks ranges);
 /// [`crate::body::Body::new`] checks what depends on the mesh.
 #[derive(Clone, Debug)]

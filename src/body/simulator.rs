@@ -14,7 +14,7 @@ use super::forces::{Model, add_gas_forces, add_spring_forces};
 use super::gas::Gas;
 use super::implicit::{self, ImplicitScratch};
 use super::obstacles::{Obstacle, project, resolve};
-use super::settings::{BodySettings, Integrator, MAX_SUBSTEPS};
+use super::settings::{BodySettings, Integrator, MAX_SUBSTEPS, MIN_TIME_STEP};
 use super::springs::{Springs, spring_strain};
 use super::surface::{Fracture, Nodes, build_springs, rebuild_springs};
 use super::vertex_order::VertexOrder;
@@ -700,13 +700,21 @@ impl Body {
     }
 
     /// How to step with substeps of at most `h`: "substeps >= N" when N is allowed
-    /// ([`MAX_SUBSTEPS`]), else a `time_step` that many substeps bring to `h`.
+    /// ([`MAX_SUBSTEPS`]), else a `time_step` that many substeps bring to `h`, or, below the
+    /// shortest allowed ([`MIN_TIME_STEP`]), that no allowed step gets there (the advice
+    /// asked for steps the C ABI refuses: found by review).
     fn smaller_steps_advice(&self, h: f64) -> String {
         let time_step = self.settings.time_step as f64;
         // (Less a hair: twice the substeps of a step must read as exactly that.)
         let substeps = (time_step / h * (1.0 - 1e-9)).ceil().max(1.0);
+        let shortest = MIN_TIME_STEP as f64 / MAX_SUBSTEPS as f64;
         if substeps <= MAX_SUBSTEPS as f64 {
             format!("substeps >= {substeps} (h = {:.3e} s)", time_step / substeps)
+        } else if h < shortest {
+            format!(
+                "a substep below {h:.3e} s, which no allowed step makes (time_step >= {MIN_TIME_STEP:e} s with \
+                 substeps <= {MAX_SUBSTEPS}: h >= {shortest:.3e} s), so another integrator"
+            )
         } else {
             format!(
                 "time_step <= {:.3e} s with substeps = {MAX_SUBSTEPS} (the most allowed; h = {h:.3e} s)",

@@ -310,11 +310,15 @@ struct IntegratorKind;
 const MOST_SUBSTEPS: u32 = 1000;
 #[cfg(feature = "body")]
 const _: () = assert!(MOST_SUBSTEPS == crate::body::MAX_SUBSTEPS);
+/// The shortest `time_step` a def may ask for, s (likewise the simulator's own).
+const LEAST_TIME_STEP: f32 = 1e-6;
+#[cfg(feature = "body")]
+const _: () = assert!(LEAST_TIME_STEP == crate::body::MIN_TIME_STEP);
 
 /// Checks every field of a def (messages name the field, its value and the valid range).
 fn validate(def: &SoftshellBodyDef) -> Result<()> {
     check_cookie(def.internal_cookie, BODY_DEF_COOKIE, "SoftshellBodyDef", "softshell_body_def_default")?;
-    check_range("time_step", def.time_step, 1e-6, 1.0)?;
+    check_range("time_step", def.time_step, LEAST_TIME_STEP, 1.0)?;
     check_count("substeps", def.substeps, 1, MOST_SUBSTEPS)?;
     check_count("iterations", def.iterations, 1, 1000)?;
     let _: IntegratorKind = arg_kind(def.integrator, "integrator", INTEGRATORS)?;
