@@ -20,13 +20,6 @@
 #define SOFTSHELL_ABI_VERSION ((SOFTSHELL_VERSION_MAJOR << 16) | (SOFTSHELL_VERSION_MINOR << 8) | SOFTSHELL_VERSION_PATCH)
 
 
-// The most substeps a step may take (the C ABI refuses more; the advice of an UNSTABLE step
-// never asks for more).
-#define MAX_SUBSTEPS 1000
-
-// The shortest step the C ABI takes, s (the advice of an UNSTABLE step never asks for less).
-#define MIN_TIME_STEP 1e-6
-
 // Explicit Euler, `x += h v; v += h a` with the old velocity: the paper's integrator. Needs
 // spring damping: its springs' modes are stable only while `h < K_d/K_s` (and, where damping
 // dominates, `h < 4/(gamma + sqrt(gamma^2 - 4 omega^2))`, with `omega^2` and `gamma` the springs'
