@@ -709,7 +709,8 @@ SoftshellStatus softshell_body_break_edges(struct SoftshellBody *body,
 // Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a NaN, or energy growing without a
 // source: in one step, or, with every integrator but XPBD, over many steps beyond what the body
 // was given): the state is rolled back to before the step, `*out_stats` is not written, and the
-// message gives the largest stable time step it estimates.
+// message gives the largest stable time step it estimates. A body's def is fixed when it is
+// made: advice such as "substeps >= 2" is for a new body made with that def.
 //
 // # Safety
 // `body` must be NULL or a live body; `out_stats` NULL or writable.
@@ -758,7 +759,8 @@ size_t softshell_body_memory_bytes(const struct SoftshellBody *body);
 // Copies the positions (x,y,z per vertex, `3 * vertex_count` floats, m) into `out`.
 // If `out` is NULL or `capacity` (in floats) is too small, returns
 // `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
-// nothing else. On success `*out_len` is the number of floats written.
+// nothing else. On success `*out_len` is the number of floats written. Returns
+// `SOFTSHELL_STATUS_NULL_ARGUMENT`, writing nothing, when the body or `out_len` is NULL.
 //
 // # Safety
 // `body` must be NULL or a live body; `out` NULL or `capacity` writable floats; `out_len` NULL
@@ -1015,7 +1017,8 @@ SoftshellStatus softshell_lattice_particle_index(const struct SoftshellLattice *
 // Copies the positions (x,y,z per particle in particle order, 3 * particle count floats, m)
 // into `out`. If `out` is NULL or `capacity` (in floats) is too small, returns
 // `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
-// nothing else. On success `*out_len` is the number of floats written.
+// nothing else. On success `*out_len` is the number of floats written. Returns
+// `SOFTSHELL_STATUS_NULL_ARGUMENT`, writing nothing, when the lattice or `out_len` is NULL.
 //
 // # Safety
 // `lattice` must be NULL or a live lattice; `out` NULL or `capacity` writable floats;
@@ -1144,7 +1147,8 @@ SoftshellStatus softshell_mesh_report(const struct SoftshellMesh *mesh,
 // Copies the positions (x,y,z per vertex, `3 * vertex_count` floats) into `out`.
 // If `out` is NULL or `capacity` (in floats) is too small, returns
 // `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
-// nothing else. On success `*out_len` is the number of floats written.
+// nothing else. On success `*out_len` is the number of floats written. Returns
+// `SOFTSHELL_STATUS_NULL_ARGUMENT`, writing nothing, when the mesh or `out_len` is NULL.
 //
 // # Safety
 // `mesh` must be NULL or a live mesh; `out` NULL or `capacity` writable floats; `out_len` NULL
@@ -1280,7 +1284,8 @@ size_t softshell_shell_vertex_count(const struct SoftshellShell *shell);
 // Copies the current positions (x,y,z per vertex, `3 * vertex_count` floats) into `out`.
 // If `out` is NULL or `capacity` (in floats) is too small, returns
 // `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
-// nothing else. On success `*out_len` is the number of floats written.
+// nothing else. On success `*out_len` is the number of floats written. Returns
+// `SOFTSHELL_STATUS_NULL_ARGUMENT`, writing nothing, when the shell or `out_len` is NULL.
 //
 // # Safety
 // `shell` must be NULL or a live shell; `out` NULL or `capacity` writable floats; `out_len`

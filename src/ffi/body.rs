@@ -629,7 +629,8 @@ pub unsafe extern "C" fn softshell_body_break_edges(
 /// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a NaN, or energy growing without a
 /// source: in one step, or, with every integrator but XPBD, over many steps beyond what the body
 /// was given): the state is rolled back to before the step, `*out_stats` is not written, and the
-/// message gives the largest stable time step it estimates.
+/// message gives the largest stable time step it estimates. A body's def is fixed when it is
+/// made: advice such as "substeps >= 2" is for a new body made with that def.
 ///
 /// # Safety
 /// `body` must be NULL or a live body; `out_stats` NULL or writable.
@@ -759,7 +760,8 @@ unsafe fn copy_from<T>(
 /// Copies the positions (x,y,z per vertex, `3 * vertex_count` floats, m) into `out`.
 /// If `out` is NULL or `capacity` (in floats) is too small, returns
 /// `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
-/// nothing else. On success `*out_len` is the number of floats written.
+/// nothing else. On success `*out_len` is the number of floats written. Returns
+/// `SOFTSHELL_STATUS_NULL_ARGUMENT`, writing nothing, when the body or `out_len` is NULL.
 ///
 /// # Safety
 /// `body` must be NULL or a live body; `out` NULL or `capacity` writable floats; `out_len` NULL

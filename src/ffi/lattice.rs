@@ -465,7 +465,8 @@ fn copy_vectors(
 /// Copies the positions (x,y,z per particle in particle order, 3 * particle count floats, m)
 /// into `out`. If `out` is NULL or `capacity` (in floats) is too small, returns
 /// `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
-/// nothing else. On success `*out_len` is the number of floats written.
+/// nothing else. On success `*out_len` is the number of floats written. Returns
+/// `SOFTSHELL_STATUS_NULL_ARGUMENT`, writing nothing, when the lattice or `out_len` is NULL.
 ///
 /// # Safety
 /// `lattice` must be NULL or a live lattice; `out` NULL or `capacity` writable floats;

@@ -333,7 +333,8 @@ pub unsafe extern "C" fn softshell_mesh_report(
 /// Copies the positions (x,y,z per vertex, `3 * vertex_count` floats) into `out`.
 /// If `out` is NULL or `capacity` (in floats) is too small, returns
 /// `SOFTSHELL_STATUS_BUFFER_TOO_SMALL`, writes the number of floats needed to `*out_len` and
-/// nothing else. On success `*out_len` is the number of floats written.
+/// nothing else. On success `*out_len` is the number of floats written. Returns
+/// `SOFTSHELL_STATUS_NULL_ARGUMENT`, writing nothing, when the mesh or `out_len` is NULL.
 ///
 /// # Safety
 /// `mesh` must be NULL or a live mesh; `out` NULL or `capacity` writable floats; `out_len` NULL
