@@ -168,8 +168,11 @@ pub(crate) fn release(
         if let Some(length) = fracture.opened_side(ring_faces[i], side) {
             fracture.set_opened_side(triangles.len() as u32, 1, length);
         }
+        fracture.broken.push(0);
+        if bit {
+            fracture.mark(triangles.len() as u32, 1);
+        }
         triangles.push([c_surface, ring[i], ring[j]]);
-        fracture.broken.push(if bit { 1 << 1 } else { 0 });
         triangles.push([c_block, copies[j], copies[i]]);
         fracture.broken.push(0);
     }

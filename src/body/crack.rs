@@ -20,7 +20,7 @@ pub(crate) fn mark_broken(fracture: &mut Fracture, topology: &Topology, edges: &
                 continue;
             }
             if let Some(side) = side_of(topology, f, e) {
-                fracture.broken[f as usize] |= 1 << side;
+                fracture.mark(f, side);
             }
         }
     }

@@ -1583,6 +1583,56 @@ mod tests {
         implicit_gas_ball(BodySettings { ground: true, ground_height: -1.2, threads, ..BodySettings::default() })
     }
 
+    /// The pending broken sides (`Fracture::pending`, read instead of every face's bits) hold
+    /// every side those scans found, through cracks, core blocks and cuts in the same steps: the
+    /// springs after every change are those of the edges without a broken side joining two
+    /// faces, and every opened side has its rest length.
+    #[test]
+    fn the_pending_broken_sides_are_all_that_a_full_scan_finds() {
+        let mut body = implicit_gas_ball_of(
+            2,
+            BodySettings { gravity: Vec3::ZERO, break_strain: 0.02, break_force: 1e-2, ..BodySettings::default() },
+        );
+        let (mut changes, mut cuts, mut cracked, mut released) = (0, 0, 0, 0);
+        for k in 0..30 {
+            if k % 3 == 1 {
+                // A cut by hand of a spring between two faces, if any is left.
+                let topology =
+                    body.topology.clone().unwrap_or_else(|| Topology::build(&body.triangles, body.nodes.len()));
+                if let Some(e) = (0..topology.edges.len()).rev().find(|&e| {
+                    topology.edge_face_count[e] == 2 && body.springs.ends.binary_search(&topology.edges[e]).is_ok()
+                }) {
+                    let [a, b] = topology.edges[e];
+                    let a = body.order.external(a as usize) as u32;
+                    let b = body.order.external(b as usize) as u32;
+                    cuts += body.break_edges(&[[a, b]]).unwrap();
+                }
+            }
+            let generation = body.generation;
+            let Ok(stats) = body.step() else { break };
+            changes += (body.generation != generation) as u32;
+            cracked += stats.springs_broken;
+            released += stats.cores_released;
+            let (Some(fracture), Some(topology)) = (body.fracture.as_ref(), body.topology.as_ref()) else { continue };
+            assert!(fracture.pending_is_complete(topology), "step {k}");
+            let expected: Vec<[u32; 2]> = (0..topology.edges.len() as u32)
+                .filter(|&e| !super::super::surface::edge_is_broken(topology, Some(fracture), e))
+                .map(|e| topology.edges[e as usize])
+                .collect();
+            assert_eq!(body.springs.ends, expected, "step {k}");
+            for f in 0..body.triangles.len() as u32 {
+                for side in (0..3).filter(|&side| fracture.is_broken(f, side)) {
+                    let e = topology.face_edges[f as usize][side];
+                    if e != u32::MAX && topology.edge_face_count[e as usize] == 1 {
+                        assert!(fracture.opened_side(f, side).is_some(), "step {k}: side {side} of face {f}");
+                    }
+                }
+            }
+        }
+        println!("{changes} changes: {cracked} springs cracked, {released} blocks released, {cuts} cut by hand");
+        assert!(changes >= 5 && cuts > 0 && cracked > 0 && released > 0, "{changes} {cracked} {released} {cuts}");
+    }
+
     /// A crack that opens neither makes nor takes spring energy: two springs through one vertex
     /// of an inflated ball break in one fracture phase (as a strain storm breaks them), the vertex
     /// splits, and the four sides of the opened crack hold between them what the two springs

@@ -73,6 +73,15 @@ pub(crate) struct Fracture {
     /// sorted by that key, set when the crack opened there ([`opened_side_rest`]). A vector,
     /// not a map, so that its memory is known to the byte.
     pub opened_rest: Vec<(u32, f32)>,
+    /// The broken sides (`3 face + side`) that may still join two faces, or have opened and
+    /// not yet been given a rest length: what [`Fracture::record_opened_sides`] and the springs'
+    /// rebuild read instead of every face's bits. A side leaves once its crack has opened and
+    /// it is recorded (no change joins a side of one face to another face again: a split only
+    /// parts faces, and a core block's caps take new faces). After the issue-5 balloon's burst
+    /// some 30,000 sides are broken and a few hundred change a step: scanning them all took
+    /// 0.8 ms of each step's 5 ms fracture phase. Unsorted between [`Fracture::mark`] and the
+    /// next record.
+    pub pending: Vec<u32>,
 }
 
 impl Fracture {
@@ -84,7 +93,31 @@ impl Fracture {
             before: Vec::new(),
             in_core: Vec::new(),
             opened_rest: Vec::new(),
+            pending: Vec::new(),
         }
+    }
+
+    /// Whether [`Fracture::pending`] holds every broken side that the full scans of old read
+    /// (every face's bits): each one that still joins two faces (or has no edge), and each one
+    /// that has opened without a recorded rest length.
+    #[cfg(test)]
+    pub fn pending_is_complete(&self, topology: &Topology) -> bool {
+        (0..self.broken.len()).all(|f| {
+            (0..3).filter(|&side| self.is_broken(f as u32, side)).all(|side| {
+                let key = 3 * f as u32 + side as u32;
+                let e = topology.face_edges[f][side];
+                let done = e != u32::MAX
+                    && topology.edge_face_count[e as usize] == 1
+                    && self.opened_side(f as u32, side).is_some();
+                done || self.pending.contains(&key)
+            })
+        })
+    }
+
+    /// Marks side `side` of face `face` broken.
+    pub fn mark(&mut self, face: u32, side: usize) {
+        self.broken[face as usize] |= 1 << side;
+        self.pending.push(3 * face + side as u32);
     }
 
     /// Records the rest length of every side of an opened crack in `topology` (that of the
@@ -96,20 +129,30 @@ impl Fracture {
         // alongside, and the new ones (in key order too) are merged in at the end, in place. (A search
         // in the known sides for each, and a sort of all of them after, took 0.26-0.66 ms of
         // each step of the issue-5 balloon's fracture storm, thousands of sides.)
+        // Only the pending sides can be new ones (see `Fracture::pending`); those that opened
+        // leave the list, recorded now or known already.
         let mut new = Vec::new();
         let mut known = self.opened_rest.iter().map(|&(k, _)| k).peekable();
-        for (f, &bits) in self.broken.iter().enumerate().filter(|(_, b)| **b != 0) {
-            for side in (0..3).filter(|&side| bits & (1 << side) != 0) {
-                let e = topology.face_edges[f][side];
-                let key = 3 * f as u32 + side as u32;
-                while known.next_if(|&k| k < key).is_some() {}
-                if e == u32::MAX || topology.edge_face_count[e as usize] != 1 || known.peek() == Some(&key) {
-                    continue;
-                }
+        let mut pending = std::mem::take(&mut self.pending);
+        pending.sort_unstable();
+        pending.dedup();
+        pending.retain(|&key| {
+            let (f, side) = ((key / 3) as usize, (key % 3) as usize);
+            if self.broken[f] & (1 << side) == 0 {
+                return false;
+            }
+            let e = topology.face_edges[f][side];
+            while known.next_if(|&k| k < key).is_some() {}
+            if e == u32::MAX || topology.edge_face_count[e as usize] != 1 {
+                return true;
+            }
+            if known.peek() != Some(&key) {
                 let [a, b] = topology.edges[e as usize].map(|v| v as usize);
                 new.push((key, opened_side_rest((x[b] - x[a]).length(), (rest[b] - rest[a]).length())));
             }
-        }
+            false
+        });
+        self.pending = pending;
         // Merged in place from the back (the new keys are none of the known ones).
         let known = self.opened_rest.len();
         self.opened_rest.resize(known + new.len(), (0, 0.0));
@@ -180,6 +223,7 @@ impl Fracture {
             + self.before.capacity() * 12
             + self.in_core.capacity()
             + self.opened_rest.capacity() * std::mem::size_of::<(u32, f32)>()
+            + self.pending.capacity() * 4
     }
 
     /// Appends a vertex at `x` with velocity `v` and `mass`, split from `from` (pinned if `from`
@@ -247,12 +291,13 @@ pub(crate) fn edge_is_broken(topology: &Topology, fracture: Option<&Fracture>, e
 }
 
 /// The edges that carry no spring, sorted: those [`edge_is_broken`] finds, gathered from the
-/// few faces with a broken side instead of asking every edge.
+/// pending broken sides ([`Fracture::pending`]) instead of asking every edge.
 fn broken_edges(topology: &Topology, fracture: Option<&Fracture>) -> Vec<u32> {
     let Some(fracture) = fracture else { return Vec::new() };
     let mut broken = Vec::new();
-    for (f, &bits) in fracture.broken.iter().enumerate().filter(|(_, b)| **b != 0) {
-        for side in (0..3).filter(|&side| bits & (1 << side) != 0) {
+    for &key in &fracture.pending {
+        let (f, side) = ((key / 3) as usize, (key % 3) as usize);
+        if fracture.broken[f] & (1 << side) != 0 {
             let e = topology.face_edges[f][side];
             // Only as edge_is_broken counts it: from one of the edge's first two faces, on the
             // face's first side along the edge.
@@ -352,7 +397,7 @@ mod tests {
             }
             for _ in 0..30 {
                 let f = random() as usize % triangles.len();
-                fracture.broken[f] |= 1 << (random() % 3);
+                fracture.mark(f as u32, (random() % 3) as usize);
             }
             let topology = Topology::build(&triangles, vertices);
             fracture.record_opened_sides(&topology, &x, &rest);
@@ -433,9 +478,12 @@ mod tests {
         let (mut border_bits, mut opened_sides) = (0, 0);
         for round in 0..50 {
             let mut fracture = Fracture::new(rest.len(), triangles.len());
-            for bits in &mut fracture.broken {
+            for f in 0..triangles.len() as u32 {
                 state = state.wrapping_mul(1_103_515_245).wrapping_add(12345);
-                *bits = if (state >> 16) % 4 == 0 { ((state >> 20) % 8) as u8 } else { 0 };
+                let bits = if (state >> 16) % 4 == 0 { (state >> 20) % 8 } else { 0 };
+                for side in (0..3).filter(|&side| bits & (1 << side) != 0) {
+                    fracture.mark(f, side);
+                }
             }
             // Rest lengths of their own for the sides of the hole (as opened cracks have them),
             // each after broken edges and before others: the spring of each is found from its
