@@ -202,10 +202,10 @@ typedef struct SoftshellBody SoftshellBody;
 // of holes, shape-matched in overlapping square regions.
 //
 // Created by `softshell_lattice_new`, destroyed by `softshell_lattice_free`. Edited with
-// `softshell_lattice_pin` / `_unpin` / `_apply_force` / `_set_positions`, advanced with
-// `softshell_lattice_step`, read with `softshell_lattice_particle_count`, `_triangle_count`,
-// `_particle_index`, `_copy_positions`, `_copy_velocities`, `_copy_goals`, `_copy_triangles`
-// and `_memory_bytes`.
+// `softshell_lattice_pin` / `_unpin` / `_apply_force` / `_clear_forces` / `_set_positions`,
+// advanced with `softshell_lattice_step`, read with `softshell_lattice_particle_count`,
+// `_triangle_count`, `_particle_index`, `_copy_positions`, `_copy_velocities`, `_copy_goals`,
+// `_copy_triangles` and `_memory_bytes`, written with `_save_ply` and `_save_obj`.
 //
 // Particles are numbered row by row (row 0 first, column 0 first within a row), holes skipped.
 // Thread rules: a lattice may move between threads, but must not be used from two threads at
@@ -957,11 +957,20 @@ SoftshellStatus softshell_lattice_apply_force(struct SoftshellLattice *lattice,
                                               uint32_t row,
                                               const float *force);
 
+// Drops the forces given by `softshell_lattice_apply_force` since the last step (an UNSTABLE
+// step leaves them pending; its message says when they drove it).
+//
+// # Safety
+// `lattice` must be NULL or a live lattice.
+SoftshellStatus softshell_lattice_clear_forces(struct SoftshellLattice *lattice);
+
 // Sets the position of every particle from `positions` (x,y,z per particle in particle order,
 // `float_count` = 3 * particle count floats), e.g. to start from a draped or rotated shape.
 // Velocities are kept; the rest shape does not change. Pinned particles move to their new
 // positions too and stay there, so this also drives pins (grab handles) frame by frame. Returns
-// `SOFTSHELL_STATUS_INVALID_ARGUMENT` (and changes nothing) for a wrong count or a NaN/inf value.
+// `SOFTSHELL_STATUS_NULL_ARGUMENT` for NULL `positions` with a non-zero count and
+// `SOFTSHELL_STATUS_INVALID_ARGUMENT` (changing nothing) for a wrong count or a value that is
+// not finite or beyond ±1e15 m (where a step would call the lattice diverged).
 //
 // # Safety
 // `lattice` must be NULL or a live lattice; `positions` NULL or `float_count` readable floats.
@@ -973,9 +982,10 @@ SoftshellStatus softshell_lattice_set_positions(struct SoftshellLattice *lattice
 // region damping, gravity and the forces given since the last step, pins.
 // `out_stats` may be NULL; otherwise it receives what the step did.
 //
-// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a value not finite, or a position
-// or speed beyond 1e15): the lattice is then exactly as before the call (the pending forces
-// included) and the message names the particle and the setting to change.
+// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a value not finite, a position
+// beyond 1e15 m or a speed beyond 1e30 m/s): the lattice is then exactly as before the call
+// (the pending forces included: `softshell_lattice_clear_forces` drops them) and the message
+// names the particle and the setting to change.
 //
 // # Safety
 // `lattice` must be NULL or a live lattice; `out_stats` NULL or writable.

@@ -203,7 +203,7 @@ pub unsafe extern "C" fn softshell_body_save_ply(
             let inner = &body.body;
             let (positions, triangles): (Vec<_>, Vec<_>) = (inner.positions().collect(), inner.triangles().collect());
             let (positions, triangles) = (&positions[..], &triangles[..]);
-            let speed: Vec<f32> = inner.velocities().map(|v| v.length()).collect();
+            let speed: Vec<f32> = inner.velocities().map(|v| v.as_dvec3().length() as f32).collect();
             let fragment = fragment_per_vertex(triangles, inner.fragment_ids(), positions.len());
             let shade: Vec<f32> = fragment.iter().map(|&f| fragment_shade(f)).collect();
             let boundary = boundary_flags(triangles, positions.len());
@@ -338,8 +338,9 @@ pub unsafe extern "C" fn softshell_lattice_save_ply(
         let velocities = to_vec3(&copy_lattice(lattice, 3 * n, softshell_lattice_copy_velocities)?);
         let goals = to_vec3(&copy_lattice(lattice, 3 * n, softshell_lattice_copy_goals)?);
         let height: Vec<f32> = positions.iter().map(|p| p.y).collect();
-        let speed: Vec<f32> = velocities.iter().map(|v| v.length()).collect();
-        let goal_distance: Vec<f32> = positions.iter().zip(&goals).map(|(p, g)| p.distance(*g)).collect();
+        let speed: Vec<f32> = velocities.iter().map(|v| v.as_dvec3().length() as f32).collect();
+        let goal_distance: Vec<f32> =
+            positions.iter().zip(&goals).map(|(p, g)| p.as_dvec3().distance(g.as_dvec3()) as f32).collect();
         let scalars = [
             VertexScalar { name: "height", values: &height },
             VertexScalar { name: "speed", values: &speed },

@@ -10,7 +10,7 @@ use super::damping::{DAMPING_FIT_CHANNELS, DAMPING_MOMENT_CHANNELS};
 use super::layout::LatticeLayout;
 use super::matching::{FIT_CHANNELS, IDENTITY_COLUMNS, MOMENT_CHANNELS, RegionRest, RotationColumns};
 use super::params::LatticeParams;
-use super::step::ring_rows;
+use super::step::{POSITION_LIMIT, ring_rows};
 use super::summation::box_sum;
 use crate::error::{Error, Result};
 use crate::parallel::WorkerPool;
@@ -183,8 +183,16 @@ impl Lattice {
         Ok(())
     }
 
+    /// Drops the forces given since the last step (what an UNSTABLE step left pending).
+    pub fn clear_forces(&mut self) {
+        if let Some(f) = self.force.as_mut() {
+            f.fill([0.0; 3]);
+        }
+    }
+
     /// Sets every particle's position from `positions` (x, y, z per particle, in particle order).
-    /// Velocities are kept. Nothing changes if the length is wrong or a value is not finite.
+    /// Velocities are kept. Nothing changes if the length is wrong or a value is not finite or
+    /// beyond ±[`POSITION_LIMIT`] (a step would take such a position for divergence).
     pub fn set_positions(&mut self, positions: &[f32]) -> Result<()> {
         let count = self.particle_count();
         if positions.len() != 3 * count {
@@ -194,9 +202,9 @@ impl Lattice {
                 3 * count
             )));
         }
-        if let Some(i) = positions.iter().position(|v| !v.is_finite()) {
+        if let Some(i) = positions.iter().position(|v| !v.is_finite() || v.abs() as f64 > POSITION_LIMIT) {
             return Err(Error::invalid_argument(format!(
-                "`positions`[{i}] (particle {}) = {} is not finite",
+                "`positions`[{i}] (particle {}) = {} is not finite and within ±{POSITION_LIMIT:e} m",
                 i / 3,
                 positions[i]
             )));

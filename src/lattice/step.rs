@@ -32,9 +32,17 @@ use super::summation::{RowWindow, add_row, row_block, running_sum_row, shift_row
 use crate::error::{Error, ErrorKind, Result};
 use crate::parallel::WorkerPool;
 
-/// Positions and speeds beyond this (m, m/s) count as diverged: far past anything physical, and
-/// still far inside f32 range, so what a caller copies out is always finite.
-const DIVERGENCE_LIMIT: f64 = 1e15;
+/// Positions beyond this (m) count as diverged: far past anything physical, and still far
+/// inside f32 range, so what a caller copies out is always finite (and a goal distance, at most
+/// a few times this, too).
+pub(crate) const POSITION_LIMIT: f64 = 1e15;
+
+/// Speeds beyond this (m/s) count as diverged. Far above [`POSITION_LIMIT`]: a step moves a
+/// particle by `alpha (g - x)` towards its goal whatever h is, at a speed of `alpha |g - x| / h`,
+/// so with a short step or a large shape a stable step is fast (1 cm in 1e-18 s, a crumpled sheet
+/// 1e14 m wide at h = 1/60 s: both taken for divergence at 1e15, with the advice of a shorter
+/// step that made it worse; found by review). Still far inside f32 range.
+const SPEED_LIMIT: f64 = 1e30;
 
 /// What the passes read.
 struct Passes<'a> {
@@ -294,9 +302,9 @@ impl Lattice {
                         if b.diverged.is_none() {
                             let speed = vel.length();
                             let reach = new_x.abs().max_element();
-                            if !new_x.is_finite() || reach > DIVERGENCE_LIMIT {
+                            if !new_x.is_finite() || reach > POSITION_LIMIT {
                                 b.diverged = Some((s, "position", reach));
-                            } else if speed.is_nan() || speed > DIVERGENCE_LIMIT {
+                            } else if speed.is_nan() || speed > SPEED_LIMIT {
                                 b.diverged = Some((s, "speed", speed));
                             }
                         }
@@ -341,13 +349,22 @@ impl Lattice {
     fn divergence_error(&self, site: usize, what: &str, value: f64) -> Error {
         let columns = self.layout.columns();
         let force = self.force.as_ref().map_or(0.0, |f| DVec3::from(f[site]).length());
+        let limit = if what == "speed" { SPEED_LIMIT } else { POSITION_LIMIT };
+        // The forces stay pending through the rollback: say how to drop them, or the next step
+        // fails alike (found by review).
+        let advice = if force > 0.0 {
+            "drop the pending forces (softshell_lattice_clear_forces) and apply smaller ones"
+        } else {
+            "no force is pending on it: gravity or a position set far away drove it; use a smaller gravity or \
+             time_step, or set positions nearer"
+        };
         Error::new(
             ErrorKind::Unstable,
             format!(
                 "the lattice step diverged: the {what} of particle (column {}, row {}) became {value:e} \
-                 (limit {DIVERGENCE_LIMIT:e}); the step was rolled back. Shape matching itself is stable for \
-                 stiffness in (0, 1]: the external force on it ({force:e} N on {} kg) or gravity drove it; \
-                 apply a smaller force or use a smaller time_step (now {} s)",
+                 (limit {limit:e}); the step was rolled back, the forces given since the last step still \
+                 pending. Shape matching itself is stable for stiffness in (0, 1]: the external force on it \
+                 ({force:e} N on {} kg) or gravity drove it (time_step {} s); {advice}",
                 site % columns,
                 site / columns,
                 self.params.particle_mass,
