@@ -368,6 +368,7 @@ _SIGNATURES = {
     "softshell_lattice_pin": (_Status, [_h, ctypes.c_uint32, ctypes.c_uint32]),
     "softshell_lattice_unpin": (_Status, [_h, ctypes.c_uint32, ctypes.c_uint32]),
     "softshell_lattice_apply_force": (_Status, [_h, ctypes.c_uint32, ctypes.c_uint32, _pf]),
+    "softshell_lattice_clear_forces": (_Status, [_h]),
     "softshell_lattice_set_positions": (_Status, [_h, _pf, ctypes.c_size_t]),
     "softshell_lattice_step": (_Status, [_h, ctypes.POINTER(LatticeStats)]),
     "softshell_lattice_particle_count": (ctypes.c_size_t, [_h]),
@@ -841,6 +842,10 @@ class Lattice(_Handle):
 
     def apply_force(self, column, row, force):
         _check(C.lattice_apply_force(self.handle, column, row, _vec3(force, "force")))
+
+    def clear_forces(self):
+        """Drops the forces given since the last step (an Unstable step leaves them pending)."""
+        _check(C.lattice_clear_forces(self.handle))
 
     def set_positions(self, positions):
         p = _floats(positions, "positions", 3)

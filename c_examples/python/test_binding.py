@@ -138,6 +138,18 @@ class Errors(unittest.TestCase):
         with self.assertRaises(ValueError):
             lattice.step()
 
+    def test_pending_forces_that_diverge_can_be_dropped(self):
+        lattice = softshell.Lattice(columns=6, rows=5)
+        big = np.finfo(np.float32).max
+        lattice.apply_force(2, 2, [big, 0, 0])
+        lattice.apply_force(2, 2, [big, 0, 0])
+        with self.assertRaises(softshell.Error) as caught:
+            lattice.step()
+        self.assertEqual(caught.exception.status_name, "UNSTABLE")
+        self.assertIn("clear_forces", str(caught.exception))
+        lattice.clear_forces()
+        lattice.step()
+
     def test_integers_out_of_range_are_refused_not_wrapped(self):
         # ctypes alone wraps 2**32 to 0: pin(2**32, 0) pinned column 0 (a review).
         lattice = softshell.Lattice(columns=4, rows=3)
