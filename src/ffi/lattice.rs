@@ -159,6 +159,9 @@ mod backend {
         pub fn apply_force(&mut self, _c: u32, _r: u32, _f: [f32; 3]) -> Result<()> {
             match *self {}
         }
+        pub fn clear_forces(&mut self) {
+            match *self {}
+        }
         pub fn set_positions(&mut self, _p: &[f32]) -> Result<()> {
             match *self {}
         }
