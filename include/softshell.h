@@ -469,7 +469,7 @@ typedef struct SoftshellMeshReport {
 // larger, the same motion in the same time steps needs pressure x s and Young's modulus x s^2
 // (thickness and density unchanged).
 typedef struct SoftshellShellDef {
-  // Time step h, s, in (0, 1]. Default 1/60.
+  // Time step h, s, in [1e-6, 1]. Default 1/60.
   float time_step;
   // Substeps per step (each runs the whole step with h/substeps), 1..=1000. Default 1.
   uint32_t substeps;
@@ -1227,8 +1227,10 @@ struct SoftshellAnisotropyDef softshell_anisotropy_def_default(void);
 //
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL argument, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
 // for a def not made by `softshell_shell_def_default`, an unknown kind or a field out of range
-// (the message names the field, its value and the valid range) or a `collision_thickness` above
-// the rest distance of two primitives sharing no vertex, `SOFTSHELL_STATUS_INVALID_MESH`
+// (the message names the field, its value and the valid range), a `collision_thickness` above
+// the rest distance of two primitives sharing no vertex, or a density, thickness and mesh that
+// give a vertex a mass below about 3e-39 kg (the f32 solver cannot invert it),
+// `SOFTSHELL_STATUS_INVALID_MESH`
 // for a mesh that is not closed, manifold, consistently oriented with outward normals (every
 // connected piece on its own) and free of degenerate triangles (the message names the first
 // offending edge or triangle), or larger than 1e6 m across (bounding-box diagonal),

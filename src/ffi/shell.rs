@@ -66,7 +66,7 @@ pub(crate) const ANISOTROPY_DEF_COOKIE: u32 = 0x414e_4931;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SoftshellShellDef {
-    /// Time step h, s, in (0, 1]. Default 1/60.
+    /// Time step h, s, in [1e-6, 1]. Default 1/60.
     pub time_step: f32,
     /// Substeps per step (each runs the whole step with h/substeps), 1..=1000. Default 1.
     pub substeps: u32,
@@ -326,7 +326,9 @@ mod convert {
     /// Validates every field of a shell def (cookie first) into settings.
     pub(super) fn shell_settings(def: &SoftshellShellDef) -> Result<ShellSettings> {
         check_cookie(def.internal_cookie, SHELL_DEF_COOKIE, "SoftshellShellDef", "softshell_shell_def_default")?;
-        check_positive("time_step", def.time_step, 1.0)?;
+        // (Not shorter: the f32 solver divides by h and h², which underflow far below it; a
+        // review saw a step of 1e-40 s leave NaN velocities behind an OK.)
+        check_range("time_step", def.time_step, 1e-6, 1.0)?;
         check_count("substeps", def.substeps, 1, 1000)?;
         check_count("iterations", def.iterations, 1, 1000)?;
         let solver = arg_kind(
@@ -435,8 +437,10 @@ fn unsupported() -> Error {
 ///
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` for a NULL argument, `SOFTSHELL_STATUS_INVALID_ARGUMENT`
 /// for a def not made by `softshell_shell_def_default`, an unknown kind or a field out of range
-/// (the message names the field, its value and the valid range) or a `collision_thickness` above
-/// the rest distance of two primitives sharing no vertex, `SOFTSHELL_STATUS_INVALID_MESH`
+/// (the message names the field, its value and the valid range), a `collision_thickness` above
+/// the rest distance of two primitives sharing no vertex, or a density, thickness and mesh that
+/// give a vertex a mass below about 3e-39 kg (the f32 solver cannot invert it),
+/// `SOFTSHELL_STATUS_INVALID_MESH`
 /// for a mesh that is not closed, manifold, consistently oriented with outward normals (every
 /// connected piece on its own) and free of degenerate triangles (the message names the first
 /// offending edge or triangle), or larger than 1e6 m across (bounding-box diagonal),

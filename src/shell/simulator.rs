@@ -181,6 +181,16 @@ impl Shell {
                 mass[v as usize] += area / 3.0 * settings.density as f64 * settings.thickness as f64;
             }
         }
+        // A vertex mass whose inverse f32 cannot hold (below about 3e-39 kg) made a shell that
+        // was accepted and could never step (found by review).
+        if let Some(v) = (0..n).find(|&v| mass[v] > 0.0 && !((1.0 / mass[v]) as f32).is_finite()) {
+            return Err(Error::invalid_argument(format!(
+                "vertex {v} gets a mass of {:e} kg (a third of its faces' area times density {:e} kg/m^3 and \
+                 thickness {:e} m), too small for the f32 solver (its inverse overflows below about 3e-39 kg): \
+                 raise density or thickness, or scale the mesh up",
+                mass[v], settings.density, settings.thickness
+            )));
+        }
         let inv_mass: Vec<f32> = mass.iter().map(|&m| if m > 0.0 { (1.0 / m) as f32 } else { 0.0 }).collect();
         bendings.set_inverse_masses(&inv_mass);
         let mut membranes = membranes;
