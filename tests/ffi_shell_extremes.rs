@@ -186,3 +186,36 @@ fn settings_the_f32_solver_cannot_step_are_refused() {
     def.substeps = 1000;
     assert_eq!(shell_from_def(&def).0, SoftshellStatus::Ok);
 }
+
+/// The residual of an XPBD step stays finite with the weakest settings accepted: a bending
+/// coefficient of 1e-40 and an anisotropic region of stiffness 1e-40 (their stiffness times h²
+/// underflows in f32, and the residual's `λ / (k h²)` was inf behind an OK; found by review).
+#[test]
+fn the_residual_is_finite_with_the_weakest_constraints() {
+    let mesh = load_data_mesh("sphere.obj");
+    for region in [false, true] {
+        let mut def = softshell_shell_def_default();
+        if !region {
+            def.bending_coefficient = 1e-40;
+        }
+        let mut shell = null_mut();
+        // SAFETY: live mesh, valid defs and face list, writable locals; the shell is freed here.
+        unsafe {
+            assert_eq!(softshell_shell_new(mesh, &def, &mut shell), SoftshellStatus::Ok, "{}", last_error());
+            if region {
+                let faces: Vec<u32> = (0..40).collect();
+                let a = SoftshellAnisotropyDef { stiffness: 1e-40, ..softshell_anisotropy_def_default() };
+                let status = softshell_shell_add_anisotropic_region(shell, faces.as_ptr(), faces.len(), &a);
+                assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+            }
+            for k in 0..3 {
+                let mut stats = SoftshellShellStats::default();
+                assert_eq!(softshell_shell_step(shell, &mut stats), SoftshellStatus::Ok, "{}", last_error());
+                assert!(stats.residual.is_finite(), "region {region}, step {k}: residual {}", stats.residual);
+            }
+            softshell_shell_free(shell);
+        }
+    }
+    // SAFETY: made above, freed once.
+    unsafe { softshell_mesh_free(mesh) };
+}

@@ -73,12 +73,16 @@ impl State {
                         v
                     };
                     let cval = (b.q[i] * held.length_squared()).max(0.0).sqrt();
+                    // α̃ as the projection clamps it, and α̃ λ in f64: with a tiny kB the
+                    // stiffness h² underflows, and the division made the residual inf (a review).
                     let r = if xpbd && stiffness > 0.0 {
-                        cval + lb[i] / (stiffness * settings.time_step.powi(2) / (settings.substeps as f32).powi(2))
+                        let h = settings.time_step / settings.substeps as f32;
+                        let alpha = (1.0 / (stiffness * h * h)).min(f32::MAX);
+                        cval as f64 + alpha as f64 * lb[i] as f64
                     } else {
-                        cval
+                        cval as f64
                     };
-                    res = res.max(r.abs() as f64);
+                    res = res.max(r.abs());
                 }
                 [energy, res, 0.0]
             });
@@ -100,8 +104,14 @@ impl State {
                     let (w, _, params) = gather_aniso(a, i, xs);
                     energy += params.stiffness as f64 * settings.thickness as f64 * w as f64;
                     let cval = (2.0 * w).max(0.0).sqrt();
-                    let r = if xpbd { cval + la[i] / (params.stiffness * c.aniso_scale) } else { cval };
-                    res = res.max((r.abs() / a.area[i].sqrt()) as f64);
+                    // (α̃ clamped as the projection has it, α̃ λ in f64: see the bending above.)
+                    let r = if xpbd {
+                        let alpha = (1.0 / (params.stiffness * c.aniso_scale)).min(f32::MAX);
+                        cval as f64 + alpha as f64 * la[i] as f64
+                    } else {
+                        cval as f64
+                    };
+                    res = res.max(r.abs() / a.area[i].sqrt() as f64);
                 }
                 [energy, res, 0.0]
             });
