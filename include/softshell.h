@@ -497,7 +497,8 @@ typedef struct SoftshellShellDef {
   // Bending coefficient kB, dimensionless, in [0, 1e6]. Default 0.01 (the paper's). With XPBD,
   // each edge stencil gets the energy `kB E t (A0+A1)/2 * E_B`: kB = 1 makes bending as stiff
   // as stretching at the scale of one triangle. With PBD it scales each bending correction,
-  // as in the paper.
+  // as in the paper, and is at most 2 (the full projection; beyond it the corrections
+  // overshoot, and beyond 4 they diverge).
   float bending_coefficient;
   // Velocity damping per second, in [0, 1e6]: velocities are scaled by max(0, 1 - damping h)
   // each substep. Default 8: the contraction is a slow, nearly quasi-static

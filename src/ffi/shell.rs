@@ -94,7 +94,8 @@ pub struct SoftshellShellDef {
     /// Bending coefficient kB, dimensionless, in [0, 1e6]. Default 0.01 (the paper's). With XPBD,
     /// each edge stencil gets the energy `kB E t (A0+A1)/2 * E_B`: kB = 1 makes bending as stiff
     /// as stretching at the scale of one triangle. With PBD it scales each bending correction,
-    /// as in the paper.
+    /// as in the paper, and is at most 2 (the full projection; beyond it the corrections
+    /// overshoot, and beyond 4 they diverge).
     pub bending_coefficient: f32,
     /// Velocity damping per second, in [0, 1e6]: velocities are scaled by max(0, 1 - damping h)
     /// each substep. Default 8: the contraction is a slow, nearly quasi-static
@@ -323,13 +324,16 @@ mod convert {
         }
     }
 
+    /// The largest bending coefficient the PBD solvers take (see `shell_settings`).
+    const PBD_MAX_BENDING: f32 = 2.0;
+
     /// Validates every field of a shell def (cookie first) into settings.
     pub(super) fn shell_settings(def: &SoftshellShellDef) -> Result<ShellSettings> {
         check_cookie(def.internal_cookie, SHELL_DEF_COOKIE, "SoftshellShellDef", "softshell_shell_def_default")?;
         // (Not shorter: the f32 solver divides by h and h², which underflow far below it; a
         // review saw a step of 1e-40 s leave NaN velocities behind an OK.)
-        check_range("time_step", def.time_step, 1e-6, 1.0)?;
-        check_count("substeps", def.substeps, 1, 1000)?;
+        check_range("time_step", def.time_step, crate::shell::MIN_TIME_STEP, 1.0)?;
+        check_count("substeps", def.substeps, 1, crate::shell::MAX_SUBSTEPS)?;
         check_count("iterations", def.iterations, 1, 1000)?;
         let solver = arg_kind(
             def.solver,
@@ -352,6 +356,17 @@ mod convert {
             "SOFTSHELL_BENDING_NONE (0), SOFTSHELL_BENDING_ISOMETRIC (1), SOFTSHELL_BENDING_ISOMETRIC_REST (2)",
         )?;
         check_range("bending_coefficient", def.bending_coefficient, 0.0, 1e6)?;
+        // With PBD, kB scales each bending correction: 2 is the full projection, beyond 4 each
+        // correction overshoots by more than it corrects and the first step diverges whatever
+        // h is (a review saw kB = 10 fail with advice that could not help).
+        if solver != SolverKind::Xpbd && def.bending_coefficient > PBD_MAX_BENDING {
+            return Err(Error::invalid_argument(format!(
+                "`bending_coefficient` = {} must be at most {PBD_MAX_BENDING} with the PBD solvers (it scales each \
+                 bending correction, and {PBD_MAX_BENDING} is the full projection); stiffer bending needs \
+                 SOFTSHELL_SOLVER_XPBD",
+                def.bending_coefficient
+            )));
+        }
         check_range("damping", def.damping, 0.0, 1e6)?;
         check_range("stop_volume_ratio", def.stop_volume_ratio, 0.0, 0.999_999)?;
         check_range("collision_thickness", def.collision_thickness, 0.0, 1.0)?;

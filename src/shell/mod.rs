@@ -13,5 +13,5 @@ mod project;
 mod settings;
 mod simulator;
 
-pub use settings::{AnisotropySettings, BendingKind, ShellSettings, SolverKind};
+pub use settings::{AnisotropySettings, BendingKind, MAX_SUBSTEPS, MIN_TIME_STEP, ShellSettings, SolverKind};
 pub use simulator::{CollisionReport, Shell, ShellStats};

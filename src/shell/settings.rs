@@ -4,6 +4,13 @@ use glam::Vec3;
 
 use crate::material::{AnisotropicEnergy, Material};
 
+/// The most substeps a step may take (the C ABI refuses more; an UNSTABLE step's advice never
+/// asks for more).
+pub const MAX_SUBSTEPS: u32 = 1000;
+
+/// The shortest step the C ABI takes, s (likewise never advised below).
+pub const MIN_TIME_STEP: f32 = 1e-6;
+
 /// How the energy constraints are solved (SPEC 1.3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SolverKind {

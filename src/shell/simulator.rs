@@ -14,7 +14,7 @@ use glam::Vec3;
 use super::constraints::{Anisotropics, Bendings, Edges, Membranes, Region};
 use super::exec::{REDUCE_CHUNK, Shared, chunk_partials, for_range};
 use super::project::membrane_energy_at;
-use super::settings::{AnisotropySettings, BendingKind, ShellSettings, SolverKind};
+use super::settings::{AnisotropySettings, BendingKind, MAX_SUBSTEPS, MIN_TIME_STEP, ShellSettings, SolverKind};
 use crate::collision::{ContactCounts, SelfContact};
 use crate::error::{Error, ErrorKind, Result};
 use crate::material::{Lame, Material};
@@ -438,6 +438,26 @@ pub(super) fn coefficients(settings: &ShellSettings, h: f32) -> Coefficients {
     }
 }
 
+/// Substeps four times shorter than `time_step / substeps`, as a def allows them (at most
+/// [`MAX_SUBSTEPS`], a step of at least [`MIN_TIME_STEP`]: a review saw "Substeps >= 4000"
+/// advised, which the def refuses).
+fn shorter_substeps_advice(time_step: f32, substeps: u32) -> String {
+    let substep = time_step / substeps as f32 / 4.0;
+    if substeps * 4 <= MAX_SUBSTEPS {
+        format!("Substeps >= {} (a substep of at most {substep:.3e} s)", substeps * 4)
+    } else if substep * MAX_SUBSTEPS as f32 >= MIN_TIME_STEP {
+        format!(
+            "A time_step of at most {:.3e} s with substeps = {MAX_SUBSTEPS} (a substep of at most {substep:.3e} s)",
+            substep * MAX_SUBSTEPS as f32
+        )
+    } else {
+        format!(
+            "No shorter substep is allowed (time_step >= {MIN_TIME_STEP:e} s with at most {MAX_SUBSTEPS} substeps): a \
+             lower pressure"
+        )
+    }
+}
+
 impl State {
     fn advance(&mut self, settings: &ShellSettings, parallel: bool, measure: bool) -> Result<()> {
         self.x_backup.copy_from_slice(&self.x);
@@ -629,12 +649,13 @@ impl State {
                 budget / (step * step)
             )
         } else {
-            format!(
-                "Substeps >= {} (a substep of at most {:.3e} s) or a lower Young's modulus than {} Pa would be stable",
-                settings.substeps * 4,
-                step / settings.substeps as f32 / 4.0,
-                settings.youngs_modulus
-            )
+            // With XPBD also a softer material; PBD's projections do not read Young's modulus.
+            let shorter = shorter_substeps_advice(step, settings.substeps);
+            if settings.solver == SolverKind::Xpbd {
+                format!("{shorter} or a lower Young's modulus than {} Pa would be stable", settings.youngs_modulus)
+            } else {
+                format!("{shorter} would be stable (the PBD solvers do not read Young's modulus)")
+            }
         };
         Error::new(
             ErrorKind::Unstable,
@@ -692,5 +713,28 @@ impl State {
             [v, 0.0, 0.0]
         });
         parts.iter().map(|s| s[0]).sum::<f64>() / 6.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The advice for shorter substeps asks only for what a def accepts: more substeps up to the
+    /// most allowed, then a shorter time step with that many, and none below the shortest step.
+    #[test]
+    fn shorter_substeps_advice_stays_within_what_a_def_accepts() {
+        assert!(shorter_substeps_advice(1.0 / 60.0, 1).starts_with("Substeps >= 4 "));
+        assert!(shorter_substeps_advice(1.0 / 60.0, 250).starts_with("Substeps >= 1000 "));
+        let beyond = shorter_substeps_advice(1.0 / 60.0, 1000);
+        assert!(beyond.starts_with("A time_step of at most 4.167e-3 s with substeps = 1000"), "{beyond}");
+        let none = shorter_substeps_advice(2e-6, 1000);
+        assert!(none.starts_with("No shorter substep is allowed"), "{none}");
+        for (step, substeps) in [(1.0f32, 1u32), (1.0, 251), (1e-3, 999), (4e-6, 1000), (1e-6, 1)] {
+            let advice = shorter_substeps_advice(step, substeps);
+            let asked = |key: &str| advice.split(key).nth(1).and_then(|t| t.split(' ').next()?.parse::<f32>().ok());
+            assert!(asked("Substeps >= ").is_none_or(|n| n <= MAX_SUBSTEPS as f32), "{advice}");
+            assert!(asked("time_step of at most ").is_none_or(|h| h >= MIN_TIME_STEP), "{advice}");
+        }
     }
 }
