@@ -1078,7 +1078,8 @@ SoftshellStatus softshell_lattice_copy_triangles(const struct SoftshellLattice *
 // The arrays are copied; the caller keeps ownership of them.
 //
 // Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` if an array is NULL with a non-zero count or
-// `out_mesh` is NULL, and `SOFTSHELL_STATUS_INVALID_MESH` for an empty mesh, an index out of
+// `out_mesh` is NULL, `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a count too large to address or
+// a misaligned array, and `SOFTSHELL_STATUS_INVALID_MESH` for an empty mesh, an index out of
 // range or a NaN/inf coordinate (the message names the triangle or vertex). Open,
 // non-manifold and degenerate meshes are accepted: check them with `softshell_mesh_report`.
 // On success `*out_mesh` receives a new handle to free with `softshell_mesh_free`; on failure
@@ -1098,7 +1099,9 @@ SoftshellStatus softshell_mesh_from_arrays(const float *positions,
 // ignored. Vertex k of the mesh is the k-th `v` line of the file, used by a face or not.
 //
 // Returns `SOFTSHELL_STATUS_IO` when the file cannot be read or a line is malformed (the
-// message gives `file:line:` and the problem), `SOFTSHELL_STATUS_INVALID_MESH` for an empty
+// message gives `file:line:` and the problem where the line is known; some errors found by
+// the OBJ parser, such as a face index out of bounds, name only the file and the problem),
+// `SOFTSHELL_STATUS_INVALID_MESH` for an empty
 // mesh or NaN/inf coordinates, `SOFTSHELL_STATUS_UNSUPPORTED` when built without the `obj`
 // feature. On success `*out_mesh` receives a new handle; on failure it is left unchanged.
 //
@@ -1279,9 +1282,11 @@ SoftshellStatus softshell_shell_add_anisotropic_region(struct SoftshellShell *sh
 // returns the last stats with `finished` true and `step_seconds` 0.
 //
 // Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a position became NaN or moved
-// more than two bounding-box diagonals): the shell is rolled back to its state before the step
-// and the message says what blew up and which settings would be stable. `out_stats` is then
-// not written.
+// more than two bounding-box diagonals in a substep, or with collisions more than a quarter of
+// one into the collision stage; the volume became non-finite; the shell turned inside out, or
+// more than a quarter of its triangle normals turned around in one step): the shell is rolled
+// back to its state before the step and the message says what blew up and which settings
+// would be stable. `out_stats` is then not written.
 //
 // # Safety
 // `shell` must be NULL or a live shell; `out_stats` NULL or writable.

@@ -137,7 +137,8 @@ fn hand_out(out_mesh: *mut *mut SoftshellMesh, mesh: TriMesh) {
 /// The arrays are copied; the caller keeps ownership of them.
 ///
 /// Returns `SOFTSHELL_STATUS_NULL_ARGUMENT` if an array is NULL with a non-zero count or
-/// `out_mesh` is NULL, and `SOFTSHELL_STATUS_INVALID_MESH` for an empty mesh, an index out of
+/// `out_mesh` is NULL, `SOFTSHELL_STATUS_INVALID_ARGUMENT` for a count too large to address or
+/// a misaligned array, and `SOFTSHELL_STATUS_INVALID_MESH` for an empty mesh, an index out of
 /// range or a NaN/inf coordinate (the message names the triangle or vertex). Open,
 /// non-manifold and degenerate meshes are accepted: check them with `softshell_mesh_report`.
 /// On success `*out_mesh` receives a new handle to free with `softshell_mesh_free`; on failure
@@ -176,7 +177,9 @@ pub unsafe extern "C" fn softshell_mesh_from_arrays(
 /// ignored. Vertex k of the mesh is the k-th `v` line of the file, used by a face or not.
 ///
 /// Returns `SOFTSHELL_STATUS_IO` when the file cannot be read or a line is malformed (the
-/// message gives `file:line:` and the problem), `SOFTSHELL_STATUS_INVALID_MESH` for an empty
+/// message gives `file:line:` and the problem where the line is known; some errors found by
+/// the OBJ parser, such as a face index out of bounds, name only the file and the problem),
+/// `SOFTSHELL_STATUS_INVALID_MESH` for an empty
 /// mesh or NaN/inf coordinates, `SOFTSHELL_STATUS_UNSUPPORTED` when built without the `obj`
 /// feature. On success `*out_mesh` receives a new handle; on failure it is left unchanged.
 ///
