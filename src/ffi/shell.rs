@@ -556,8 +556,8 @@ pub unsafe extern "C" fn softshell_shell_add_anisotropic_region(
 /// returns the last stats with `finished` true and `step_seconds` 0.
 ///
 /// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a position became NaN or moved
-/// more than two bounding-box diagonals in a substep, or with collisions more than a quarter of
-/// one into the collision stage; the volume became non-finite; the shell turned inside out, or
+/// more than two bounding-box diagonals in a substep; the volume became non-finite; the shell
+/// turned inside out, or
 /// more than a quarter of its triangle normals turned around in one step): the shell is rolled
 /// back to its state before the step and the message says what blew up and which settings
 /// would be stable. `out_stats` is then not written.

@@ -63,14 +63,6 @@ pub(crate) const STALL_STEPS: u32 = 60;
 /// no contraction moves a surface that far, only a blow-up does.
 const DIVERGED_DIAGONALS: f32 = 2.0;
 
-/// With collisions, the same above this fraction of a diagonal, checked before the collision
-/// stage: its swept boxes then overlap across the whole mesh, and a step of the 482-vertex
-/// sphere at 6,000 Pa (a vertex moving 0.48 diagonals a substep) tested all 1.5 million pairs in
-/// 6 s, the kitten at 480 Pa 12.5 million in 22-71 s, each to return OK (found by review). The
-/// contraction tests and the paper's scenes move at most 0.023 diagonals a substep; the sphere
-/// at 1,000 Pa 0.08 (12,756 pairs, 0.03 s).
-const COLLISION_MOTION_DIAGONALS: f32 = 0.25;
-
 /// Largest bounding-box diagonal of a shell's mesh, m. The solver works in f32 and squares
 /// lengths and areas (|e1 x e2|² grows as the fourth power of the size, past f32's range near
 /// 1e9 m; the energies multiply that by moduli up to 1e12): a mesh under 1e6 m keeps every such
@@ -496,9 +488,8 @@ impl State {
             // SPEC 1.1 step 3: collisions over x_t -> p, between the constraint sweeps and the
             // velocity update.
             if self.contact.is_some() {
-                // A diverged p would give the collision stage infinite boxes, and one far beyond
-                // a contraction's motion boxes that overlap everything: fail first.
-                self.check_motion_within(settings, parallel, COLLISION_MOTION_DIAGONALS)?;
+                // A diverged p would give the collision stage infinite boxes: fail first.
+                self.check_motion(settings, parallel)?;
                 let start = Instant::now();
                 let counts = self.resolve_collisions(settings, h);
                 report.counts.add(&counts);
@@ -581,13 +572,8 @@ impl State {
     /// `DIVERGED_DIAGONALS` bounding-box diagonals. Run before the collision stage too, whose
     /// bounding boxes must be finite.
     fn check_motion(&mut self, settings: &ShellSettings, parallel: bool) -> Result<()> {
-        self.check_motion_within(settings, parallel, DIVERGED_DIAGONALS)
-    }
-
-    /// [`State::check_motion`] with a limit of `diagonals` bounding-box diagonals.
-    fn check_motion_within(&mut self, settings: &ShellSettings, parallel: bool, diagonals: f32) -> Result<()> {
         let n = self.x.len();
-        let limit = (diagonals * self.diagonal).powi(2);
+        let limit = (DIVERGED_DIAGONALS * self.diagonal).powi(2);
         let (x, pp) = (&self.x, &self.p);
         let partials = &mut self.partials[..n.div_ceil(REDUCE_CHUNK)];
         chunk_partials(parallel, n, partials, |start, end| {
@@ -603,11 +589,9 @@ impl State {
         if !(worst <= limit as f64) {
             let what = if worst.is_finite() {
                 format!(
-                    "a vertex moved {:.3e} m in one substep ({:.2} times the mesh's bounding-box diagonal, where \
-                     {diagonals} is the most a substep may move{})",
+                    "a vertex moved {:.3e} m in one substep ({:.1} times the mesh's bounding-box diagonal)",
                     worst.sqrt(),
-                    worst.sqrt() / self.diagonal as f64,
-                    if diagonals < DIVERGED_DIAGONALS { " into the collision stage" } else { "" }
+                    worst.sqrt() / self.diagonal as f64
                 )
             } else {
                 "a vertex position became NaN or infinite".to_owned()
