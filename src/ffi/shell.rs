@@ -557,10 +557,9 @@ pub unsafe extern "C" fn softshell_shell_add_anisotropic_region(
 ///
 /// Returns `SOFTSHELL_STATUS_UNSTABLE` when the step diverged (a position became NaN or moved
 /// more than two bounding-box diagonals in a substep; the volume became non-finite; the shell
-/// turned inside out, or
-/// more than a quarter of its triangle normals turned around in one step): the shell is rolled
-/// back to its state before the step and the message says what blew up and which settings
-/// would be stable. `out_stats` is then not written.
+/// turned inside out, or more than a quarter of its triangle normals turned around in one step):
+/// the shell is rolled back to its state before the step and the message says what blew up and
+/// which settings would be stable (settings a def accepts). `out_stats` is then not written.
 ///
 /// # Safety
 /// `shell` must be NULL or a live shell; `out_stats` NULL or writable.

@@ -438,13 +438,15 @@ pub(super) fn coefficients(settings: &ShellSettings, h: f32) -> Coefficients {
     }
 }
 
-/// Substeps four times shorter than `time_step / substeps`, as a def allows them (at most
-/// [`MAX_SUBSTEPS`], a step of at least [`MIN_TIME_STEP`]: a review saw "Substeps >= 4000"
-/// advised, which the def refuses).
-fn shorter_substeps_advice(time_step: f32, substeps: u32) -> String {
-    let substep = time_step / substeps as f32 / 4.0;
-    if substeps * 4 <= MAX_SUBSTEPS {
-        format!("Substeps >= {} (a substep of at most {substep:.3e} s)", substeps * 4)
+/// How a def with this `time_step` gets substeps of at most `substep` (s): more substeps up to
+/// [`MAX_SUBSTEPS`], else a shorter step with that many, never a step below [`MIN_TIME_STEP`]
+/// (reviews saw "Substeps >= 4000" and "a time_step of at most 7.1e-7 s" advised, which the def
+/// refuses).
+fn substeps_advice(time_step: f32, substep: f32) -> String {
+    // (Less a hair: a quarter of a substep must read as exactly four times the substeps.)
+    let substeps = (time_step / substep * (1.0 - 1e-6)).ceil().max(1.0);
+    if substeps <= MAX_SUBSTEPS as f32 {
+        format!("Substeps >= {substeps} (a substep of at most {substep:.3e} s)")
     } else if substep * MAX_SUBSTEPS as f32 >= MIN_TIME_STEP {
         format!(
             "A time_step of at most {:.3e} s with substeps = {MAX_SUBSTEPS} (a substep of at most {substep:.3e} s)",
@@ -452,8 +454,8 @@ fn shorter_substeps_advice(time_step: f32, substeps: u32) -> String {
         )
     } else {
         format!(
-            "No shorter substep is allowed (time_step >= {MIN_TIME_STEP:e} s with at most {MAX_SUBSTEPS} substeps): a \
-             lower pressure"
+            "No allowed step makes substeps of {substep:.3e} s (time_step >= {MIN_TIME_STEP:e} s with at most \
+             {MAX_SUBSTEPS} substeps)"
         )
     }
 }
@@ -639,18 +641,23 @@ impl State {
         let budget = 0.1 * self.mean_edge * areal_mass;
         let pressure = settings.pressure.abs();
         let stable_step = if pressure > 0.0 { (budget / pressure).sqrt() } else { f32::INFINITY };
-        let advice = if stable_step < step {
+        let substep = step / settings.substeps as f32;
+        let advice = if stable_step < substep {
+            // As a def allows it: more substeps, else a shorter step with the most substeps,
+            // never below the shortest step (a review saw "a time_step of at most 7.1e-7 s").
             format!(
-                "The pressure alone moves a vertex {:.3e} m per step against a mean edge of {:.3e} m: a time_step of at \
-                 most {stable_step:.3e} s or a pressure of at most {:.3e} Pa would be stable; without collisions keep \
-                 stop_volume_ratio above 0 so the run ends before the surface passes through itself",
-                step * step * pressure / areal_mass,
+                "The pressure alone moves a vertex {:.3e} m per substep against a mean edge of {:.3e} m: {} or a \
+                 pressure of at most {:.3e} Pa would be stable; without collisions keep stop_volume_ratio above 0 \
+                 so the run ends before the surface passes through itself",
+                substep * substep * pressure / areal_mass,
                 self.mean_edge,
-                budget / (step * step)
+                substeps_advice(step, stable_step),
+                budget / (substep * substep)
             )
         } else {
-            // With XPBD also a softer material; PBD's projections do not read Young's modulus.
-            let shorter = shorter_substeps_advice(step, settings.substeps);
+            // Four times shorter substeps; with XPBD also a softer material (PBD's projections do
+            // not read Young's modulus).
+            let shorter = substeps_advice(step, substep / 4.0);
             if settings.solver == SolverKind::Xpbd {
                 format!("{shorter} or a lower Young's modulus than {} Pa would be stable", settings.youngs_modulus)
             } else {
@@ -723,15 +730,20 @@ mod tests {
     /// The advice for shorter substeps asks only for what a def accepts: more substeps up to the
     /// most allowed, then a shorter time step with that many, and none below the shortest step.
     #[test]
-    fn shorter_substeps_advice_stays_within_what_a_def_accepts() {
-        assert!(shorter_substeps_advice(1.0 / 60.0, 1).starts_with("Substeps >= 4 "));
-        assert!(shorter_substeps_advice(1.0 / 60.0, 250).starts_with("Substeps >= 1000 "));
-        let beyond = shorter_substeps_advice(1.0 / 60.0, 1000);
+    fn substeps_advice_stays_within_what_a_def_accepts() {
+        let h = 1.0f32 / 60.0;
+        assert!(substeps_advice(h, h / 4.0).starts_with("Substeps >= 4 "));
+        assert!(substeps_advice(h, h / 250.0 / 4.0).starts_with("Substeps >= 1000 "));
+        let beyond = substeps_advice(h, h / 4000.0);
         assert!(beyond.starts_with("A time_step of at most 4.167e-3 s with substeps = 1000"), "{beyond}");
-        let none = shorter_substeps_advice(2e-6, 1000);
-        assert!(none.starts_with("No shorter substep is allowed"), "{none}");
-        for (step, substeps) in [(1.0f32, 1u32), (1.0, 251), (1e-3, 999), (4e-6, 1000), (1e-6, 1)] {
-            let advice = shorter_substeps_advice(step, substeps);
+        let none = substeps_advice(2e-6, 2e-6 / 4000.0);
+        assert!(none.starts_with("No allowed step makes substeps"), "{none}");
+        // The pressure's advice for the unit sphere at 1e10 Pa asked for a time step of 7.1e-7 s.
+        let pressure = substeps_advice(h, 7.073e-7);
+        assert!(pressure.starts_with("A time_step of at most 7.073e-4 s with substeps = 1000"), "{pressure}");
+        assert!(substeps_advice(1e-6, 7.073e-11).starts_with("No allowed step"));
+        for (step, substep) in [(1.0f32, 0.25f32), (1.0, 1.0 / 1004.0), (1e-3, 2.5e-7), (4e-6, 1e-9), (1e-6, 0.1)] {
+            let advice = substeps_advice(step, substep);
             let asked = |key: &str| advice.split(key).nth(1).and_then(|t| t.split(' ').next()?.parse::<f32>().ok());
             assert!(asked("Substeps >= ").is_none_or(|n| n <= MAX_SUBSTEPS as f32), "{advice}");
             assert!(asked("time_step of at most ").is_none_or(|h| h >= MIN_TIME_STEP), "{advice}");
