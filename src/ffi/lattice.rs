@@ -44,7 +44,7 @@ pub struct SoftshellLatticeDef {
     /// regions' rigid motion removed per step (damps wobble, keeps rigid motion). Default 0.2.
     /// 0 turns it off and saves its memory and time.
     pub damping: f32,
-    /// Time step, s, in (0, 1]. Default 1/60.
+    /// Time step, s, in [1e-6, 1]. Default 1/60.
     pub time_step: f32,
     /// Mass of each particle, kg, in (0, 1e12]. Default 0.01.
     pub particle_mass: f32,

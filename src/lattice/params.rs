@@ -61,6 +61,9 @@ fn positive(name: &str, value: f32, max: f32, why: &str) -> Result<()> {
     Ok(())
 }
 
+/// The shortest time step, s.
+const MIN_TIME_STEP: f32 = 1e-6;
+
 impl LatticeParams {
     /// Checks every field; the first bad one is named in the error.
     pub fn validate(&self) -> Result<()> {
@@ -92,7 +95,15 @@ impl LatticeParams {
         if !self.damping.is_finite() || !(0.0..=1.0).contains(&self.damping) {
             return Err(Error::invalid_argument(format!("`damping` = {} must be finite and in [0, 1]", self.damping)));
         }
-        positive("time_step", self.time_step, 1.0, " s")?;
+        // Not shorter (as the other simulators): a step moves a particle by `alpha (g - x)` at a
+        // speed of `alpha |g - x| / h`, and far shorter steps made stable speeds beyond any
+        // divergence limit (a review saw 4e30 m/s at h = 1e-33 s).
+        if !self.time_step.is_finite() || !(MIN_TIME_STEP..=1.0).contains(&self.time_step) {
+            return Err(Error::invalid_argument(format!(
+                "`time_step` = {} must be finite and in [{MIN_TIME_STEP:e}, 1] s",
+                self.time_step
+            )));
+        }
         if !self.velocity_damping.is_finite() || self.velocity_damping < 0.0 || self.velocity_damping > 1e6 {
             return Err(Error::invalid_argument(format!(
                 "`velocity_damping` = {} must be finite and in [0, 1e6] (1/s)",

@@ -39,9 +39,10 @@ pub(crate) const POSITION_LIMIT: f64 = 1e15;
 
 /// Speeds beyond this (m/s) count as diverged. Far above [`POSITION_LIMIT`]: a step moves a
 /// particle by `alpha (g - x)` towards its goal whatever h is, at a speed of `alpha |g - x| / h`,
-/// so with a short step or a large shape a stable step is fast (1 cm in 1e-18 s, a crumpled sheet
-/// 1e14 m wide at h = 1/60 s: both taken for divergence at 1e15, with the advice of a shorter
-/// step that made it worse; found by review). Still far inside f32 range.
+/// so with a short step or a large shape a stable step is fast (a crumpled sheet 1e14 m wide at
+/// h = 1/60 s was taken for divergence at 1e15, with the advice of a shorter step that made it
+/// worse; found by review): with positions within [`POSITION_LIMIT`] and steps of at least 1e-6 s
+/// a stable step stays below about 1e22 m/s. Still far inside f32 range.
 const SPEED_LIMIT: f64 = 1e30;
 
 /// What the passes read.
