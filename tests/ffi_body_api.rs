@@ -402,6 +402,12 @@ fn an_impulse_that_would_make_a_velocity_too_large_is_refused() {
     let after = snapshot(&b);
     assert_eq!(after.velocities, before.velocities, "a refused impulse changed a velocity");
     let mass = after.masses[3];
+    // Finite but beyond the bound: 1e13 m/s.
+    // SAFETY: as above.
+    let status = unsafe { softshell_body_apply_impulse(b.0, 3, [mass * 1e13, 0.0, 0.0].as_ptr()) };
+    assert_eq!(status, SoftshellStatus::InvalidArgument, "1e13 m/s");
+    assert!(last_error().contains("1e12"), "{}", last_error());
+    assert_eq!(snapshot(&b).velocities, before.velocities);
     // 1 m/s on that vertex.
     // SAFETY: as above.
     let status = unsafe { softshell_body_apply_impulse(b.0, 3, [mass, 0.0, 0.0].as_ptr()) };
