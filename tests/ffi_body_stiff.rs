@@ -426,9 +426,9 @@ fn advice_beyond_every_allowed_step_names_another_integrator() {
 /// h = 1/15 s, cracking: a step that turns a few joules into 1e13 (vertices at 5e6 m/s, light
 /// copies made by the cracks under the clamped gas's forces) is rolled back and reported
 /// UNSTABLE. It passed before: the one-step test allowed what the forces could give a vertex
-/// from rest in one step, which a 1e-10 kg vertex makes 5e18 J (an allowance for the explicit
-/// integrators' first step, which implicit Euler does not take; found by review). Then the
-/// advice (more substeps) runs the scene with every step's kinetic energy bounded.
+/// from rest in one step, which a 1e-10 kg vertex makes 5e18 J (for implicit Euler the allowance
+/// is now at most 100 times the energy available; found by review). Then the advice (more
+/// substeps) runs the scene with every step's kinetic energy bounded.
 #[test]
 fn implicit_euler_rolls_back_a_step_that_makes_energy_from_nothing() {
     let (positions, triangles) = icosphere(2, 0.5);
@@ -484,4 +484,28 @@ fn implicit_euler_rolls_back_a_step_that_makes_energy_from_nothing() {
         let stats = try_step(&b).unwrap_or_else(|e| panic!("step {k} with substeps {substeps}: {e:?}"));
         assert!(stats.kinetic_energy < bound, "step {k}: {} J", stats.kinetic_energy);
     }
+}
+
+/// Implicit Euler's contacts make some energy at long steps (velocities kept after the solve,
+/// restitution): a ball bouncing on the ground at h = 1 s with restitution 0.9 made 39.7 J from
+/// 9.0 J available, and is not a divergence. Without any allowance for it (the first fix of the
+/// 1e13 J step above) this was reported UNSTABLE at its second step; it runs 240 steps, bounded
+/// (found by review).
+#[test]
+fn implicit_euler_bouncing_at_one_second_steps_is_not_called_unstable() {
+    let (positions, triangles) = icosphere(2, 0.5);
+    let lowest = positions.chunks(3).map(|p| p[1]).fold(f32::INFINITY, f32::min);
+    let mut def = softshell_body_def_default();
+    def.ground = true;
+    def.ground_height = lowest;
+    def.time_step = 1.0;
+    def.restitution = 0.9;
+    let b = body(&positions, &triangles, &def);
+    let mut most = 0.0f64;
+    for k in 0..240 {
+        let stats = try_step(&b).unwrap_or_else(|e| panic!("step {k}: {e:?}"));
+        most = most.max(stats.kinetic_energy);
+    }
+    println!("most kinetic energy {most:.1} J");
+    assert!(most < 1e3, "{most} J");
 }
