@@ -898,3 +898,39 @@ fn a_cut_with_a_refused_pair_changes_nothing() {
     assert_eq!(snapshot(&b).generation, before.generation + 1);
     step(&b);
 }
+
+/// A cut through a vertex whose fans differ in rest area by 1e30 (an open fan of well-shaped
+/// faces whose edges grow a millionfold from one face to the next) gives the sliver fan's copy
+/// at least a thousandth of the vertex's mass: it got 8.5e-41 kg, whose f32 inverse overflows, and
+/// every step after the cut diverged (found by review). Mass is kept; the body steps on.
+#[test]
+fn a_cut_gives_no_copy_a_mass_without_an_f32_inverse() {
+    let q =
+        |r: f64, degrees: f64| [(r * degrees.to_radians().cos()) as f32, (r * degrees.to_radians().sin()) as f32, 0.0];
+    let points = [
+        [0.0, 0.0, 0.0],
+        [1e-15, 0.0, 0.0],
+        q(1e-9, 20.0),
+        q(1e-3, 40.0),
+        q(1e3, 60.0),
+        q(1e9, 80.0),
+        [0.0, -1e6, 0.0],
+        [1e6, -1e6, 0.0],
+    ];
+    let positions: Vec<f32> = points.concat();
+    let triangles = [0u32, 2, 3, 0, 3, 4, 0, 4, 5, 1, 6, 7, 0, 1, 2];
+    let mut def = softshell_body_def_default();
+    (def.gas_amount, def.total_mass, def.integrator) = (0.0, 1e-3, SOFTSHELL_INTEGRATOR_XPBD);
+    let b = body(&positions, &triangles, &def);
+    let before = snapshot(&b);
+    assert!(before.masses.iter().all(|m| m.is_normal()));
+    // SAFETY: live body.
+    assert_eq!(unsafe { softshell_body_break_edge(b.0, 0, 2) }, SoftshellStatus::Ok, "{}", last_error());
+    let after = snapshot(&b);
+    assert!(after.vertex_count() > before.vertex_count(), "the cut must split a vertex");
+    assert!(after.masses.iter().all(|m| (1.0 / m).is_finite()), "{:?}", after.masses);
+    assert!((after.total_mass() - before.total_mass()).abs() <= 1e-6 * before.total_mass());
+    for k in 0..5 {
+        try_step(&b).unwrap_or_else(|e| panic!("step {k} after the cut: {e:?}"));
+    }
+}

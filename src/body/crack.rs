@@ -1,8 +1,9 @@
 //! Cracks (SPEC 2.4, edge-aligned form of the virtual node algorithm): a broken spring marks
 //! its edge broken on both faces; then at each end vertex the fan of faces is split at the broken
 //! edges, and every fan after the first gets a copy of the vertex (same x and v, mass split by
-//! fan rest area, appended so that no survivor is renumbered). Faces keep their index and winding;
-//! only the corner that named the vertex is re-instanced. A broken edge carries no spring while
+//! fan rest area, each fan at least a thousandth, appended so that no survivor is renumbered).
+//! Faces keep their index and winding; only the corner that named the vertex is re-instanced. A
+//! broken edge carries no spring while
 //! its two faces still share it; once the split parts them, each is an edge of one face and a
 //! spring again (`surface::edge_is_broken`), so every face keeps its three sides.
 //!
@@ -110,6 +111,9 @@ pub(crate) fn fan_labels(
     count as usize
 }
 
+/// The least share of a vertex's mass the copy of one of its fans takes.
+const MIN_FAN_SHARE: f64 = 1e-3;
+
 /// Rest area of a triangle: masses are split by rest area, which is never zero (a crumpled,
 /// zero-area fan must not end up with no mass).
 fn triangle_area(nodes: &Nodes, t: [u32; 3]) -> f64 {
@@ -176,10 +180,17 @@ pub(crate) fn split_fans(
         for (&f, &label) in faces.iter().zip(own) {
             areas[label as usize] += triangle_area(nodes, triangles[f as usize]);
         }
+        // Each fan's share of the rest area, at least MIN_FAN_SHARE (then all scaled to sum to
+        // 1): a sliver fan's copy got a mass whose f32 inverse overflows (8.5e-41 kg beside
+        // faces a million times larger: every later step was NaN; found by review).
+        let total: f64 = areas.iter().sum();
+        for a in areas.iter_mut() {
+            *a = if total > 0.0 { (*a / total).max(MIN_FAN_SHARE) } else { 1.0 };
+        }
         let total: f64 = areas.iter().sum();
         let vi = v as usize;
         let mass = nodes.mass[vi] as f64;
-        let share = |k: usize| if total > 0.0 { areas[k] / total } else { 1.0 / count as f64 };
+        let share = |k: usize| areas[k] / total;
         let (x, vel, rest) = (nodes.x[vi], nodes.v[vi], nodes.rest[vi]);
         let mut given = 0.0f64;
         for k in 1..count {
