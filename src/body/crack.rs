@@ -9,7 +9,7 @@
 //!
 //! Mass and momentum are conserved exactly (the copies share the velocity); positions do not move.
 
-use super::surface::{Fracture, Nodes, side_of};
+use super::surface::{Fracture, Nodes, edge_is_broken, side_of};
 use crate::mesh::{NO_FACE, Topology};
 use crate::parallel::WorkerPool;
 
@@ -25,15 +25,6 @@ pub(crate) fn mark_broken(fracture: &mut Fracture, topology: &Topology, edges: &
             }
         }
     }
-}
-
-/// Whether edge `e` is marked broken on one of its first two faces (those `mark_broken` marks;
-/// as `surface::edge_is_broken` counts it).
-fn edge_marked_broken(fracture: &Fracture, topology: &Topology, e: u32) -> bool {
-    topology.edge_faces[e as usize]
-        .iter()
-        .filter(|&&g| g != NO_FACE)
-        .any(|&g| side_of(topology, g, e).is_some_and(|side| fracture.is_broken(g, side)))
 }
 
 fn find(parent: &mut [u32], mut i: u32) -> u32 {
@@ -66,7 +57,8 @@ pub(crate) fn fan_labels(
                 continue;
             }
             let e = topology.face_edges[f as usize][side];
-            if e == u32::MAX || topology.edge_face_count[e as usize] < 2 || edge_marked_broken(fracture, topology, e) {
+            if e == u32::MAX || topology.edge_face_count[e as usize] < 2 || edge_is_broken(topology, Some(fracture), e)
+            {
                 continue;
             }
             let mut join = |j: usize| {
@@ -240,7 +232,7 @@ mod tests {
                     let e = topology.face_edges[f as usize][side];
                     if (t[side] != v && t[(side + 1) % 3] != v)
                         || e == u32::MAX
-                        || crate::body::surface::edge_is_broken(topology, Some(fracture), e)
+                        || edge_is_broken(topology, Some(fracture), e)
                     {
                         continue;
                     }

@@ -280,7 +280,6 @@ pub(crate) fn side_of(topology: &Topology, face: u32, edge: u32) -> Option<usize
 /// each is a spring like every other edge of the surface: a face keeps its three sides, so no
 /// face is left held at a corner by nothing (before, the sides of an opened crack had no spring,
 /// and after a fracture storm faces with two free sides stretched without bound).
-#[cfg(test)]
 pub(crate) fn edge_is_broken(topology: &Topology, fracture: Option<&Fracture>, edge: u32) -> bool {
     let Some(fracture) = fracture else { return false };
     topology.edge_face_count[edge as usize] >= 2
