@@ -204,7 +204,7 @@ impl Lattice {
         }
         if let Some(i) = positions.iter().position(|v| !v.is_finite() || v.abs() as f64 > POSITION_LIMIT) {
             return Err(Error::invalid_argument(format!(
-                "`positions`[{i}] (particle {}) = {} is not finite and within ±{POSITION_LIMIT:e} m",
+                "`positions`[{i}] (particle {}) = {} must be finite and within ±{POSITION_LIMIT:e} m",
                 i / 3,
                 positions[i]
             )));

@@ -335,9 +335,7 @@ impl Lattice {
         std::mem::swap(&mut self.x, &mut self.x_next);
         std::mem::swap(&mut self.v, &mut self.v_next);
         std::mem::swap(&mut self.rotation, &mut self.rotation_next);
-        if let Some(f) = self.force.as_mut() {
-            f.fill([0.0; 3]);
-        }
+        self.clear_forces();
         self.steps += 1;
         self.time = self.steps as f64 * h;
         stats.step = self.steps;
