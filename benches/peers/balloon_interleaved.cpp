@@ -15,6 +15,9 @@
 //     quick          200 steps of each instead of 600
 //     block=<steps>  steps of one simulator before the other takes its turn (default 10)
 //     threads=<n>    softshell's threads (default 2)
+// STEP_TIMES=<file> in the environment also writes each step's time of both sides there, a line
+// per step ("<step> <Bullet's seconds> <softshell's seconds>"), from which the script takes each
+// step's fastest round.
 // BLOCK_POSITIONS=1 in the environment also prints each side's mean step time by the step's
 // place in its block (the first step of a block starts with the other's data in the caches and,
 // for softshell, its worker asleep).
@@ -208,6 +211,17 @@ int main(int argc, char** argv) {
       }
       if (c > 0) std::printf("position %d in block: ours %.3f ms, Bullet %.3f ms\n", k, o / c * 1e3, b / c * 1e3);
     }
+  }
+  if (const char* path = std::getenv("STEP_TIMES")) {
+    FILE* file = std::fopen(path, "w");
+    if (file == nullptr) {
+      std::fprintf(stderr, "cannot write %s\n", path);
+      return 1;
+    }
+    for (int k = 0; k < steps; ++k) {
+      std::fprintf(file, "%d %.9f %.9f\n", k, bullet_times.seconds[k], our_times.seconds[k]);
+    }
+    std::fclose(file);
   }
   if (bullet_nan >= 0) std::printf("Bullet's nodes are not finite from step %d\n", bullet_nan);
   std::printf("RESULT bullet_ms=%.4f bullet_median=%.4f ours_ms=%.4f ours_median=%.4f ratio=%.4f median_ratio=%.4f "
