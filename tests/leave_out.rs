@@ -117,6 +117,41 @@ fn body_without_gas_fracture_cg_or_pool_holds_none() {
     println!("body memory: plain {m_plain}, gas {m_gas}, fracture {m_fracture}, 2 threads {}", two.memory());
 }
 
+/// A plain body (no gas, no fracture, no wind, no obstacle, one thread) holds what its state
+/// needs and not much more, whatever the integrator: per vertex its position, velocity, rest
+/// position, mass and inverse (44 bytes), the saved state a rolled-back step returns to (24),
+/// the caller's numbering both ways (8) and the integrator's per-vertex vectors; per face its
+/// corners and fragment (16); per spring its ends and rest length (12). A budget, not a
+/// snapshot of today's figure: a per-vertex spring adjacency kept by an integrator that does
+/// not gather by vertex (16 bytes a spring, a third of such a body), fracture bookkeeping or a
+/// kept topology all break it.
+#[test]
+fn a_plain_body_holds_its_state_and_its_integrators_vectors_only() {
+    let (p, t) = unit_obj("sphere.obj", 1.0);
+    let (n, faces) = (p.len() / 3, t.len() / 3);
+    let springs = faces * 3 / 2; // closed mesh
+    let state = 44 * n + 24 * n + 8 * n + 16 * faces + 12 * springs;
+    // The integrators' own vectors: explicit and symplectic Euler a force and a gas gradient
+    // per vertex (12 bytes each); XPBD those and the previous positions, and a multiplier per
+    // spring (4).
+    for (integrator, per_vertex, per_spring) in [
+        (SOFTSHELL_INTEGRATOR_EXPLICIT_EULER, 24, 0),
+        (SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, 24, 0),
+        (SOFTSHELL_INTEGRATOR_XPBD, 36, 4),
+    ] {
+        let def = SoftshellBodyDef { integrator, spring_stiffness: 10.0, ..body_def() };
+        let body = Body::new(&p, &t, &def).unwrap();
+        body.step().unwrap();
+        let budget = state + per_vertex * n + per_spring * springs + 4096;
+        println!("integrator {integrator}: {} bytes, budget {budget}", body.memory());
+        assert!(
+            body.memory() <= budget,
+            "integrator {integrator}: {} bytes against a budget of {budget}",
+            body.memory()
+        );
+    }
+}
+
 #[test]
 fn lattice_without_damping_pins_forces_or_pool_holds_none() {
     let def = SoftshellLatticeDef { columns: 48, rows: 48, ..softshell_lattice_def_default() };

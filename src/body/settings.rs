@@ -1,5 +1,6 @@
 //! The settings of a soft body (the Rust side of `SoftshellBodyDef`).
 
+use super::springs::Adjacency;
 use glam::Vec3;
 
 /// Time integrator of a soft body (SPEC 2.2).
@@ -99,5 +100,11 @@ impl BodySettings {
     /// True when fracture can happen by itself (a break limit is set).
     pub fn fracture_enabled(&self) -> bool {
         self.break_strain > 0.0 || self.break_force > 0.0
+    }
+
+    /// Whether the springs keep their per-vertex adjacency: only for the implicit integrator,
+    /// which gathers its system by vertex ([`Adjacency`]).
+    pub(crate) fn spring_adjacency(&self) -> Adjacency {
+        if self.integrator == Integrator::ImplicitEuler { Adjacency::Built } else { Adjacency::LeftOut }
     }
 }

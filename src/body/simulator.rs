@@ -307,7 +307,7 @@ impl Body {
         }
         let inv_mass = mass.iter().map(|&m| if m > 0.0 { 1.0 / m } else { 0.0 }).collect();
         let mut nodes = Nodes { v: vec![Vec3::ZERO; n], rest: x.clone(), x, mass, inv_mass };
-        let mut springs = build_springs(topology, None, &nodes.rest);
+        let mut springs = build_springs(topology, None, &nodes.rest, settings.spring_adjacency());
         let face_fragment = topology.face_components.clone();
         let fragment_count = topology.component_count;
         let gas = (settings.gas_amount > 0.0).then(|| {
@@ -1371,12 +1371,13 @@ impl Body {
         // 0.6 ms each on the issue-5 balloon's first cracking step).
         let (springs, gas) = {
             let (topology, fracture, nodes) = (&topology, self.fracture.as_ref(), &self.nodes);
+            let adjacency = self.settings.spring_adjacency();
             let (triangles, face_fragment, fragment_count) =
                 (&self.triangles, &self.face_fragment, self.fragment_count);
             self.pool.join(
                 || {
                     let t = Instant::now();
-                    let springs = rebuild_springs(topology, fracture, &nodes.rest, old_springs);
+                    let springs = rebuild_springs(topology, fracture, &nodes.rest, old_springs, adjacency);
                     trace_phase("rebuild: springs", t);
                     springs
                 },

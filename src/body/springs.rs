@@ -13,7 +13,8 @@ pub(crate) struct Springs {
     pub rest: Vec<f32>,
     /// Springs around each vertex in CSR form: those of vertex i are
     /// `adjacency[offsets[i]..offsets[i + 1]]` as (spring, other end), in spring order. Lets the
-    /// parallel loops gather per vertex in a fixed order instead of scattering.
+    /// parallel loops gather per vertex in a fixed order instead of scattering. Both empty
+    /// unless built ([`Adjacency`]).
     pub offsets: Vec<u32>,
     pub adjacency: Vec<(u32, u32)>,
     /// Names this adjacency (each [`Springs::build_adjacency`] takes a new one; 0: none built),
@@ -25,6 +26,15 @@ pub(crate) struct Springs {
     /// fracture check skips it. Made by a rebuild after a topology change, empty before the
     /// first (and in a body that cannot crack); every spring may break where it is empty.
     pub one_face: Vec<bool>,
+}
+
+/// Whether a body's springs keep their per-vertex adjacency ([`Springs::offsets`],
+/// [`Springs::adjacency`]): only the implicit integrator gathers its system by vertex; the
+/// others loop over the springs, and the adjacency was about 30% of such a body's memory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Adjacency {
+    Built,
+    LeftOut,
 }
 
 impl Springs {
@@ -86,11 +96,13 @@ impl Springs {
         }
         with_room(&mut self.ends, headroom);
         with_room(&mut self.rest, headroom);
-        with_room(&mut self.adjacency, headroom);
-        // The offsets take one more entry while they are built.
-        self.offsets.push(0);
-        with_room(&mut self.offsets, headroom);
-        self.offsets.pop();
+        if self.adjacency_id != 0 {
+            with_room(&mut self.adjacency, headroom);
+            // The offsets take one more entry while they are built.
+            self.offsets.push(0);
+            with_room(&mut self.offsets, headroom);
+            self.offsets.pop();
+        }
     }
 
     /// (spring, other end) pairs around vertex `i`.

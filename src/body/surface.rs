@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 
-use super::springs::Springs;
+use super::springs::{Adjacency, Springs};
 use crate::mesh::{Topology, TopologySpare};
 
 /// Per-vertex state, structure of arrays.
@@ -317,8 +317,14 @@ fn broken_edges(topology: &Topology, fracture: Option<&Fracture>) -> Vec<u32> {
 /// One spring per edge but the broken ones that still join two faces ([`edge_is_broken`]), with
 /// rest length `|X_a - X_b|` from the rest positions, or for a side of an opened crack the one
 /// it was given when it opened ([`Fracture::opened_rest`]).
-pub(crate) fn build_springs(topology: &Topology, fracture: Option<&Fracture>, rest: &[Vec3]) -> Springs {
-    rebuild_springs(topology, fracture, rest, Springs::default())
+/// With `adjacency` built, also the springs around each vertex ([`Adjacency`]).
+pub(crate) fn build_springs(
+    topology: &Topology,
+    fracture: Option<&Fracture>,
+    rest: &[Vec3],
+    adjacency: Adjacency,
+) -> Springs {
+    rebuild_springs(topology, fracture, rest, Springs::default(), adjacency)
 }
 
 /// [`build_springs`] into the buffers of `springs` (the springs before a topology change): a
@@ -329,6 +335,7 @@ pub(crate) fn rebuild_springs(
     fracture: Option<&Fracture>,
     rest: &[Vec3],
     mut springs: Springs,
+    adjacency: Adjacency,
 ) -> Springs {
     let broken = broken_edges(topology, fracture);
     let count = topology.edges.len() - broken.len();
@@ -361,7 +368,9 @@ pub(crate) fn rebuild_springs(
             springs.rest[e as usize - before] = length;
         }
     }
-    springs.build_adjacency(rest.len());
+    if adjacency == Adjacency::Built {
+        springs.build_adjacency(rest.len());
+    }
     springs
 }
 
@@ -426,7 +435,8 @@ mod tests {
         let vertices = 120;
         let rest: Vec<Vec3> =
             (0..vertices + 40).map(|k| Vec3::new(k as f32, (k * k % 11) as f32, 0.25 * k as f32)).collect();
-        let mut springs = build_springs(&Topology::build(&triangles, vertices), None, &rest[..vertices]);
+        let mut springs =
+            build_springs(&Topology::build(&triangles, vertices), None, &rest[..vertices], Adjacency::Built);
         springs.reserve_headroom(0.125);
         let arrays = |s: &Springs| {
             [
@@ -444,8 +454,8 @@ mod tests {
             current[3 * round][0] = (vertices + round) as u32;
             let count = vertices + round + 1;
             let topology = Topology::build(&current, count);
-            let fresh = build_springs(&topology, None, &rest[..count]);
-            springs = rebuild_springs(&topology, None, &rest[..count], springs);
+            let fresh = build_springs(&topology, None, &rest[..count], Adjacency::Built);
+            springs = rebuild_springs(&topology, None, &rest[..count], springs, Adjacency::Built);
             assert_eq!(
                 (&springs.ends, &springs.rest, &springs.offsets, &springs.adjacency),
                 (&fresh.ends, &fresh.rest, &fresh.offsets, &fresh.adjacency),
@@ -473,7 +483,7 @@ mod tests {
         let mut state = 99u32;
         // Each round's springs are rebuilt into the buffers of the round before (as a crack
         // does): the same springs as a new build.
-        let mut previous = build_springs(&topology, None, &rest);
+        let mut previous = build_springs(&topology, None, &rest, Adjacency::Built);
         let (mut border_bits, mut opened_sides) = (0, 0);
         for round in 0..50 {
             let mut fracture = Fracture::new(rest.len(), triangles.len());
@@ -495,8 +505,9 @@ mod tests {
                 }
             }
             fracture.opened_rest = opened.iter().map(|(&key, &(_, length))| (key, length)).collect();
-            let springs = build_springs(&topology, Some(&fracture), &rest);
-            let reused = rebuild_springs(&topology, Some(&fracture), &rest, std::mem::take(&mut previous));
+            let springs = build_springs(&topology, Some(&fracture), &rest, Adjacency::Built);
+            let reused =
+                rebuild_springs(&topology, Some(&fracture), &rest, std::mem::take(&mut previous), Adjacency::Built);
             assert_eq!(
                 (&reused.ends, &reused.rest, &reused.offsets, &reused.adjacency, &reused.one_face),
                 (&springs.ends, &springs.rest, &springs.offsets, &springs.adjacency, &springs.one_face),
@@ -538,7 +549,7 @@ mod tests {
         }
         assert!(opened_sides > 20, "only {opened_sides} sides had rest lengths of their own");
         assert!(border_bits > 0, "no round marked a border side broken");
-        let without_fracture = build_springs(&topology, None, &rest);
+        let without_fracture = build_springs(&topology, None, &rest, Adjacency::Built);
         assert_eq!(without_fracture.ends, topology.edges);
         // No fracture bookkeeping, no flags: every spring may break.
         assert!(without_fracture.one_face.is_empty());
