@@ -326,7 +326,8 @@ typedef struct SoftshellBodyStats {
   // Kinetic energy, J.
   double kinetic_energy;
   // Energy error: (kinetic + spring + gas + gravitational energy) minus its initial value, the
-  // work of wind and impulses, and the gas energy that leaks took away, J. Damping and
+  // work of wind and impulses (and the kinetic energy a pin took away), and the gas energy
+  // that leaks took away, J. Damping and
   // contacts make it negative; a growing positive value means the integrator is adding
   // energy. A topology change (a crack, a core block, a cut) moves no energy into the drift:
   // what it takes or gives (a spring that broke, the gas of a shred) is left out, and the
@@ -662,6 +663,7 @@ SoftshellStatus softshell_body_add_plane_obstacle(struct SoftshellBody *body,
                                                   const float *normal);
 
 // Pins vertex `vertex`: it stays where it is (velocity zero) and no longer responds to forces.
+// The kinetic energy it had counts as external work in `energy_drift`.
 // Returns `SOFTSHELL_STATUS_INVALID_ARGUMENT` for an index out of range.
 //
 // # Safety

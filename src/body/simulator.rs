@@ -549,9 +549,12 @@ impl Body {
         Ok(self.order.internal(vertex as usize))
     }
 
-    /// Pins a vertex: it no longer moves (its velocity is set to zero; it keeps its mass).
+    /// Pins a vertex: it no longer moves (its velocity is set to zero; it keeps its mass). The
+    /// kinetic energy that takes away counts as external work (as an impulse's does), so the
+    /// energy drift does not take it for the integrator's.
     pub fn pin(&mut self, vertex: u32) -> Result<()> {
         let i = self.check_vertex(vertex, "vertex")?;
+        self.external_work -= energy::kinetic(&self.nodes.mass[i..=i], &self.nodes.v[i..=i]);
         self.nodes.inv_mass[i] = 0.0;
         self.nodes.v[i] = Vec3::ZERO;
         self.energy_now = None;
