@@ -351,7 +351,8 @@ typedef struct SoftshellBodyStats {
   // its pressure stopped growing).
   bool volume_clamped;
   // Largest spring strain at the end of the step (of every spring, also those on a border,
-  // which never break: see `SoftshellBodyDef::break_strain`).
+  // which never break: see `SoftshellBodyDef::break_strain`); 0 when none is stretched (a
+  // compression is not counted).
   double max_strain;
   // Conjugate-gradient iterations of the step (implicit Euler), 0 otherwise.
   uint64_t solver_iterations;

@@ -1492,7 +1492,8 @@ impl Body {
         let (volume, pressure) = match &self.gas {
             Some(gas) => {
                 let with_gas = (0..gas.fragment_count()).filter(|&f| gas.n_rt[f] > 0.0);
-                let volume: f64 = with_gas.clone().map(|f| gas.volume[f]).sum();
+                // (A fold from +0: a sum over no piece is -0 in Rust.)
+                let volume = with_gas.clone().map(|f| gas.volume[f]).fold(0.0, |a, b| a + b);
                 // The pressure the gas pushes with: each piece's volume clamped as in its force
                 // (`Gas::pressure`), so a squeezed piece reports the pressure it stopped at.
                 let pushing_volume: f64 = with_gas.clone().map(|f| gas.volume[f].max(gas.v_min[f])).sum();
@@ -1599,6 +1600,18 @@ mod tests {
     /// The gas ball dropped on the ground.
     fn ball(threads: u32) -> Body {
         implicit_gas_ball(BodySettings { ground: true, ground_height: -1.2, threads, ..BodySettings::default() })
+    }
+
+    /// A body whose pieces all hold no gas (every one leaked out) reports a volume of +0, not
+    /// the -0 of a float sum over nothing (found by review).
+    #[test]
+    fn a_body_without_gas_in_any_piece_reports_a_volume_of_plus_zero() {
+        let mut body = implicit_gas_ball(BodySettings::default());
+        body.gas.as_mut().unwrap().n_rt.fill(0.0);
+        let energies = body.energy_parts();
+        let stats = body.stats(0, 0, 0.0, 0, energies);
+        assert!(stats.volume == 0.0 && stats.volume.is_sign_positive(), "{}", stats.volume);
+        assert_eq!(stats.pressure, 0.0);
     }
 
     /// The pending broken sides (`Fracture::pending`, read instead of every face's bits) hold

@@ -172,7 +172,8 @@ pub struct SoftshellBodyStats {
     /// its pressure stopped growing).
     pub volume_clamped: bool,
     /// Largest spring strain at the end of the step (of every spring, also those on a border,
-    /// which never break: see `SoftshellBodyDef::break_strain`).
+    /// which never break: see `SoftshellBodyDef::break_strain`); 0 when none is stretched (a
+    /// compression is not counted).
     pub max_strain: f64,
     /// Conjugate-gradient iterations of the step (implicit Euler), 0 otherwise.
     pub solver_iterations: u64,
