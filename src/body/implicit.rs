@@ -113,6 +113,13 @@ pub(crate) struct ImplicitScratch {
     /// changes), which the assembly turns into the start of the solve in place (a buffer of
     /// its own was another 164 KB read and written per substep on the balloon).
     dv: Vec<Vec3A>,
+    /// The warm start and the held contacts at the start of the step (copied by its first
+    /// substep's assembly, with the positions and velocities to roll back to): a step rolled
+    /// back puts them back too ([`ImplicitScratch::restore_step_start`]), so that a retry is
+    /// the same step and a failed one leaves no trace in later ones (it started the retry from
+    /// the failed solve's Δv: found by review).
+    saved_dv: Vec<Vec3A>,
+    saved_held: Vec<bool>,
     r: Vec<Vec3A>,
     z: Vec<Vec3A>,
     p: Vec<Vec3A>,
@@ -249,6 +256,23 @@ impl ImplicitScratch {
         self.coarse.is_some() && self.coarse_h == h
     }
 
+    /// The warm start and the held contacts (tests of the rollback).
+    #[cfg(test)]
+    pub fn warm_start_and_held(&self) -> (Vec<Vec3A>, Vec<bool>) {
+        (self.dv.clone(), self.contact_held.clone())
+    }
+
+    /// Puts back the warm start and the held contacts the step started with (saved by its
+    /// first substep, as the positions and velocities are), after the step was rolled back.
+    pub fn restore_step_start(&mut self) {
+        if self.saved_dv.len() == self.dv.len() {
+            std::mem::swap(&mut self.dv, &mut self.saved_dv);
+        }
+        if self.saved_held.len() == self.contact_held.len() {
+            std::mem::swap(&mut self.contact_held, &mut self.saved_held);
+        }
+    }
+
     /// Forgets what the last substep prepared for the next (the state changed since).
     pub fn forget_prepared(&mut self) {
         self.prepared = None;
@@ -302,6 +326,7 @@ impl ImplicitScratch {
         (self.force.capacity() + self.gradient.capacity()) * 12
             + (self.rhs.capacity()
                 + self.dv.capacity()
+                + self.saved_dv.capacity()
                 + self.r.capacity()
                 + self.z.capacity()
                 + self.p.capacity()
@@ -311,6 +336,7 @@ impl ImplicitScratch {
             + self.contact_slot.capacity() * 4
             + self.contact_normal.capacity() * 16
             + self.contact_held.capacity()
+            + self.saved_held.capacity()
             + self.planes.capacity() * 24
             + self.couplings.memory_bytes()
             + self.spring_terms.capacity() * std::mem::size_of::<SpringTerms>()
@@ -1605,6 +1631,10 @@ pub(crate) fn substep(
         // A vertex appended by a split starts free (the reaction is measured per vertex).
         s.contact_held.resize(n, false);
     }
+    if saving {
+        s.saved_dv.resize(n, Vec3A::ZERO);
+        s.saved_held.resize(s.contact_held.len(), false);
+    }
     let fragments = s.gas_dot.len();
     let chunks = n.div_ceil(CHUNK);
     let face_chunks = model.triangles.len().div_ceil(gas::FACE_CHUNK);
@@ -1672,6 +1702,7 @@ pub(crate) fn substep(
         coarse_dots: SharedSlice::new(&mut s.sums.coarse_dots),
     };
     let force = &s.force;
+    let (saved_dv, saved_held) = (SharedSlice::new(&mut s.saved_dv), SharedSlice::new(&mut s.saved_held));
     let (gradient, gas_coef) = (SharedSlice::new(&mut s.gradient), SharedSlice::new(&mut s.gas_coef));
     let (xs, vs) = (SharedSlice::new(x), SharedSlice::new(v));
     let momentum = SharedSlice::new(&mut s.sums.momentum);
@@ -1869,11 +1900,18 @@ pub(crate) fn substep(
             team.claim(chunks, |c| {
                 let rows = rows(c);
                 if saving {
-                    // SAFETY: this member's chunk of the saved state; nobody writes x and v in
-                    // this pass.
+                    // SAFETY: this member's chunk of the saved state and of Δv and the held
+                    // contacts (written by this chunk's assembly after the copy); nobody writes
+                    // x and v in this pass.
                     unsafe {
                         save_x.part(rows.clone()).copy_from_slice(&sys.x[rows.clone()]);
                         save_v.part(rows.clone()).copy_from_slice(&sys.v[rows.clone()]);
+                        // The warm start before this chunk's assembly turns it into the start
+                        // of the solve, and the contacts the last substep held.
+                        saved_dv.part(rows.clone()).copy_from_slice(shared.dv.part(rows.clone()));
+                        if !obstacles.is_empty() {
+                            saved_held.part(rows.clone()).copy_from_slice(&shared.contact_held.whole()[rows.clone()]);
+                        }
                     }
                 }
                 let (first, end) = (rows.start, rows.end);
