@@ -471,7 +471,10 @@ fn implicit_euler_rolls_back_a_step_that_makes_energy_from_nothing() {
         }
     }
     let message = message.expect("the squeezed ball diverges at h = 1/15 s in one substep");
-    assert!(message.contains("kinetic energy grew"), "{message}");
+    // Caught by the one-step rule or, a step later, by the drift rule (which one depends on
+    // roundings of the path: the one-step rule's cap is guarded by the bound above on every
+    // step that passed).
+    assert!(message.contains("kinetic energy grew") || message.contains("energy made without a source"), "{message}");
     let substeps = message
         .split("substeps >= ")
         .nth(1)
@@ -508,4 +511,35 @@ fn implicit_euler_bouncing_at_one_second_steps_is_not_called_unstable() {
     }
     println!("most kinetic energy {most:.1} J");
     assert!(most < 1e3, "{most} J");
+}
+
+/// A free stiff ball keeps the momentum a push gave it under implicit Euler: internal forces
+/// cannot change it, and the step's correction aims at the external force alone (zero here),
+/// not at the sum of the f32 forces, whose large spring and gas terms cancel only to their
+/// rounding (that moved this ball's momentum by 4.2% of the push in 30 steps).
+#[test]
+fn a_free_stiff_ball_keeps_its_momentum_under_implicit_euler() {
+    let (p, t) = icosphere(2, 0.5);
+    let def = SoftshellBodyDef {
+        integrator: SOFTSHELL_INTEGRATOR_IMPLICIT_EULER,
+        gravity: [0.0; 3],
+        spring_stiffness: 1e5,
+        total_mass: 0.1,
+        gas_amount: 700.0,
+        time_step: 0.05,
+        ..softshell_body_def_default()
+    };
+    let ball = body(&p, &t, &def);
+    let push = [1e-3f32, 0.0, 0.0];
+    // SAFETY: live body, float[3].
+    assert_eq!(unsafe { softshell_body_apply_impulse(ball.0, 5, push.as_ptr()) }, SoftshellStatus::Ok);
+    let start = snapshot(&ball).momentum();
+    let mut worst = 0.0f64;
+    for _ in 0..30 {
+        step(&ball);
+        let now = snapshot(&ball).momentum();
+        worst = worst.max((0..3).map(|a| (now[a] - start[a]).powi(2)).sum::<f64>().sqrt());
+    }
+    println!("momentum {start:?}, worst change {worst:.3e}");
+    assert!(worst < 1e-5 * push[0] as f64, "the momentum moved by {worst:e} after a push of {}", push[0]);
 }
