@@ -815,7 +815,11 @@ SoftshellStatus softshell_body_copy_triangles(const struct SoftshellBody *body,
 
 // Copies, for each vertex, the input-mesh vertex it was split from (one uint32_t per vertex;
 // the identity before any fracture). Vertex indices are stable: fracture appends vertices and
-// never renumbers. Buffer rules of `softshell_body_copy_positions` (counts in uint32_t).
+// never renumbers. A crack's copies start where their origin is. A core block adds two more
+// vertices that are not copies: the centres of the caps that close the block and the hole, at
+// the mean of the ring around the released vertex; the block's centre has the released
+// vertex's origin, the hole's that of a vertex of the ring. Buffer rules of
+// `softshell_body_copy_positions` (counts in uint32_t).
 //
 // # Safety
 // As `softshell_body_copy_triangles`.
