@@ -28,6 +28,10 @@ fn shell_without_bending_anisotropy_multipliers_or_pool_holds_none() {
     let none = Shell::new(&p, &t, &SoftshellShellDef { bending: SOFTSHELL_BENDING_NONE, ..shell_def() }).unwrap();
     let edges = t.len() / 2; // closed mesh: 3F/2 edges
     assert!(none.memory() + edges * 16 <= plain, "bending: {} vs {plain}", none.memory());
+    // kB = 0 stores none either.
+    let zero = Shell::new(&p, &t, &SoftshellShellDef { bending_coefficient: 0.0, ..shell_def() }).unwrap();
+    assert_eq!(zero.memory(), none.memory(), "kB = 0 keeps bending constraints");
+    assert_eq!(zero.step().unwrap().bending_energy, 0.0);
     let mut bent = 0.0;
     for _ in 0..10 {
         assert_eq!(none.step().unwrap().bending_energy, 0.0);

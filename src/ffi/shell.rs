@@ -91,7 +91,8 @@ pub struct SoftshellShellDef {
     pub density: f32,
     /// `SOFTSHELL_BENDING_ISOMETRIC_REST` (default), `_ISOMETRIC` (the paper's) or `_NONE`.
     pub bending: u32,
-    /// Bending coefficient kB, dimensionless, in [0, 1e6]. Default 0.01 (the paper's). With XPBD,
+    /// Bending coefficient kB, dimensionless, in [0, 1e6]. Default 0.01 (the paper's). 0 stores
+    /// no bending constraints, as `SOFTSHELL_BENDING_NONE` does. With XPBD,
     /// each edge stencil gets the energy `kB E t (A0+A1)/2 * E_B`: kB = 1 makes bending as stiff
     /// as stretching at the scale of one triangle. With PBD it scales each bending correction,
     /// as in the paper, and is at most 2 (the full projection; beyond it the corrections

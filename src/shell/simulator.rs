@@ -168,8 +168,11 @@ impl Shell {
         let membranes = Membranes::build(&rest, &triangles, settings.material == Material::Linear)?;
         let edges =
             if settings.solver == SolverKind::PbdDistance { Edges::build(&rest, topology) } else { Edges::default() };
+        // kB = 0 is no bending either: no stencils (half of a shell's memory without collisions)
+        // and no work for them.
         let mut bendings = match settings.bending {
             BendingKind::None => Bendings::default(),
+            _ if settings.bending_coefficient == 0.0 => Bendings::default(),
             kind => Bendings::build(&rest, &triangles, topology, kind == BendingKind::IsometricRest),
         };
         // Lumped masses: a third of the area of each face around a vertex, times ρ t (SPEC 1.1).
