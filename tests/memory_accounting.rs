@@ -10,8 +10,9 @@ use std::cell::Cell;
 
 use report_util::*;
 use softshell::ffi::body::*;
+use softshell::ffi::lattice::*;
 use softshell::ffi::shell::*;
-use softshell::ffi::{SoftshellBodyDef, SoftshellShellDef};
+use softshell::ffi::{SoftshellBodyDef, SoftshellLatticeDef, SoftshellShellDef};
 
 /// Counts the bytes allocated and not yet freed by each thread (freed memory counts against the
 /// thread that frees it). Per thread, because libtest's own threads allocate while a test runs
@@ -125,4 +126,43 @@ fn a_cracking_body_reports_what_it_holds() {
         broken += body.step().unwrap().springs_broken;
     }
     assert!(broken > 1000, "{broken} springs broken");
+}
+
+/// With collisions, the trees and the pair caches too (the trees were estimated before, 1-2%
+/// off either way; a review), stepping so that the caches fill.
+#[test]
+fn the_shell_reports_its_collision_data() {
+    let def = SoftshellShellDef { threads: 1, stop_volume_ratio: 0.0, ..softshell_shell_def_default() };
+    for (mesh, pressure) in [("sphere.obj", 1.0f32), ("eight.obj", 30.0)] {
+        let (p, t) = unit_obj(mesh, 1.0);
+        let before = live();
+        let shell = Shell::new(&p, &t, &SoftshellShellDef { pressure: def.pressure * pressure, ..def }).unwrap();
+        for step in 0..6 {
+            let (reported, held) = (shell.memory() as isize, live() - before);
+            assert!((reported - held).abs() <= 256, "{mesh} after {step} steps: reports {reported}, holds {held}");
+            shell.step().unwrap();
+        }
+    }
+}
+
+/// The lattice's figure, plain, with damping, and once pins and forces are stored.
+#[test]
+fn the_lattice_reports_what_it_holds() {
+    let def = SoftshellLatticeDef { columns: 40, rows: 30, threads: 1, ..softshell_lattice_def_default() };
+    for damping in [0.0f32, 0.2] {
+        let before = live();
+        let lattice = Lattice::new(&SoftshellLatticeDef { damping, ..def }).unwrap();
+        for step in 0..4 {
+            if step == 2 {
+                lattice.pin(0, 0).unwrap();
+                lattice.force(5, 5, [0.0, 1.0, 0.0]).unwrap();
+            }
+            let (reported, held) = (lattice.memory() as isize, live() - before);
+            assert!(
+                (reported - held).abs() <= 256,
+                "damping {damping} after {step} steps: reports {reported}, holds {held}"
+            );
+            lattice.step().unwrap();
+        }
+    }
 }

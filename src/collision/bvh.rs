@@ -178,9 +178,6 @@ struct LeafLanes {
     keys: [[Vec4; 2]; 3],
 }
 
-/// Bytes of one leaf's lanes (for memory estimates).
-pub(crate) const LEAF_LANES_BYTES: usize = std::mem::size_of::<LeafLanes>();
-
 /// A key as the f32 compared in [`LeafLanes::sharing`]: the bits of a positive normal float
 /// (never a subnormal, which the DAZ mode of a host's MXCSR would compare equal to 0), so two
 /// keys compare equal exactly when they are equal. Keys from 2^30 up
@@ -288,6 +285,23 @@ pub struct Bvh {
 pub(crate) const REBUILD_LOOSENESS_RATIO: f64 = 1.5;
 
 impl Bvh {
+    /// Heap bytes of the tree's arrays (their capacities).
+    pub fn memory_bytes(&self) -> usize {
+        fn b<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        b(&self.nodes)
+            + b(&self.order)
+            + b(&self.boxes)
+            + b(&self.leaf_boxes)
+            + b(&self.leaf_lanes)
+            + b(&self.slot)
+            + b(&self.keys)
+            + b(&self.leaf_keys)
+            + b(&self.parent)
+            + b(&self.leaf_of)
+    }
+
     /// Builds the tree over `boxes` (primitive i has box `boxes[i]`).
     pub fn build(boxes: Vec<Aabb>) -> Bvh {
         Self::build_with_keys(boxes, Vec::new())

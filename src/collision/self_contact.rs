@@ -22,7 +22,7 @@
 
 use glam::{DVec3, Vec3, Vec3A};
 
-use super::bvh::{Box32, Bvh, LEAF_LANES_BYTES};
+use super::bvh::{Box32, Bvh};
 use super::ccd::{CcdSettings, Stage, edge_edge_with, vertex_triangle_with};
 use super::filters::V3;
 use super::hull_filter::{
@@ -377,23 +377,17 @@ impl SelfContact {
         }
     }
 
-    /// Heap and struct bytes (the trees' node arrays are estimated from the leaf size: at most
-    /// one 64-byte node per two primitives).
+    /// Heap bytes (each array's capacity, the trees' too; the struct itself is its owner's:
+    /// the shell holds it inline, and counted it twice).
     pub fn memory_bytes(&self) -> usize {
         fn b<T>(v: &Vec<T>) -> usize {
             v.capacity() * std::mem::size_of::<T>()
         }
-        // Per primitive: its box, the box again in leaf order, its index in the order and back.
-        // Leaves hold 4 to 8 primitives, each with its lanes.
-        let tree = |n: usize| {
-            n * (2 * std::mem::size_of::<Box32>() + 8) + n.div_ceil(2) * 64 + n.div_ceil(4) * LEAF_LANES_BYTES
-        };
-        std::mem::size_of::<Self>()
-            + b(&self.edges)
+        b(&self.edges)
             + b(&self.triangles)
-            + tree(self.vertex_boxes.len())
-            + tree(self.edge_boxes.len())
-            + tree(self.face_boxes.len())
+            + self.vertex_tree.memory_bytes()
+            + self.edge_tree.memory_bytes()
+            + self.face_tree.memory_bytes()
             + b(&self.vertex_boxes)
             + b(&self.edge_boxes)
             + b(&self.face_boxes)
