@@ -122,8 +122,9 @@ fn body_without_gas_fracture_cg_or_pool_holds_none() {
 }
 
 /// A plain body (no gas, no fracture, no wind, no obstacle, one thread) holds what its state
-/// needs and not much more, whatever the integrator: per vertex its position, velocity, rest
-/// position, mass and inverse (44 bytes), the saved state a rolled-back step returns to (24),
+/// needs and not much more, with the explicit, symplectic or XPBD integrator: per vertex its
+/// position, velocity, rest position, mass and inverse (44 bytes), the saved state a
+/// rolled-back step returns to (24),
 /// the caller's numbering both ways (8) and the integrator's per-vertex vectors; per face its
 /// corners and fragment (16); per spring its ends and rest length (12). A budget, not a
 /// snapshot of today's figure: a per-vertex spring adjacency kept by an integrator that does
@@ -136,7 +137,7 @@ fn a_plain_body_holds_its_state_and_its_integrators_vectors_only() {
     let springs = faces * 3 / 2; // closed mesh
     let state = 44 * n + 24 * n + 8 * n + 16 * faces + 12 * springs;
     // The integrators' own vectors: explicit and symplectic Euler a force and a gas gradient
-    // per vertex (12 bytes each); XPBD those and the previous positions, and a multiplier per
+    // per vertex (12 bytes each); XPBD those and the substep's displacement, and a multiplier per
     // spring (4).
     for (integrator, per_vertex, per_spring) in [
         (SOFTSHELL_INTEGRATOR_EXPLICIT_EULER, 24, 0),

@@ -30,8 +30,8 @@ pub fn shell_scene() -> String {
          (20 steps of 1/60 s, before it buckles), collisions off. Reference: 256 substeps and 40 \
          iterations; the row \"reference check\" is its distance to 128 substeps: the runs at 128, \
          256 and 512 substeps differ by about that much and not in order, the f32 positions' floor \
-         (doubling the iterations moves the reference about 200x less). Error: RMS vertex distance to the reference at t = 1/3 s, relative to \
-         the diagonal (1). The note gives V/V0 at the end.",
+         (doubling the iterations moves the reference about 200x less). Error: RMS vertex \
+         distance to the reference at t = 1/3 s, relative to the diagonal (1). The note gives V/V0 at the end.",
         i.pressure,
         i.youngs_modulus,
         i.poisson_ratio,

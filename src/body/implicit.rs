@@ -265,12 +265,12 @@ impl ImplicitScratch {
     /// Puts back the warm start and the held contacts the step started with (saved by its
     /// first substep, as the positions and velocities are), after the step was rolled back.
     pub fn restore_step_start(&mut self) {
-        if self.saved_dv.len() == self.dv.len() {
-            std::mem::swap(&mut self.dv, &mut self.saved_dv);
-        }
-        if self.saved_held.len() == self.contact_held.len() {
-            std::mem::swap(&mut self.contact_held, &mut self.saved_held);
-        }
+        // Both are sized by the step's first substep, after Δv and the held contacts are (no
+        // step changes the vertex count before its end).
+        debug_assert_eq!(self.saved_dv.len(), self.dv.len());
+        debug_assert_eq!(self.saved_held.len(), self.contact_held.len());
+        std::mem::swap(&mut self.dv, &mut self.saved_dv);
+        std::mem::swap(&mut self.contact_held, &mut self.saved_held);
     }
 
     /// Forgets what the last substep prepared for the next (the state changed since).

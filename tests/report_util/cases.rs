@@ -115,7 +115,8 @@ pub fn run_shell(positions: &[f32], triangles: &[u32], def: &SoftshellShellDef, 
                         .all(|v| v.is_finite());
                 if !finite || max_abs(&p) > BOUND {
                     return Outcome::Broken(format!(
-                        "step {k}: not finite or not bounded: {stats:?}, max |x| {}",
+                        "step {}: not finite or not bounded: {stats:?}, max |x| {}",
+                        k + 1,
                         max_abs(&p)
                     ));
                 }
@@ -123,11 +124,11 @@ pub fn run_shell(positions: &[f32], triangles: &[u32], def: &SoftshellShellDef, 
             }
             Err((SoftshellStatus::Unstable, message)) => {
                 if bits(&shell.positions()) != before {
-                    return Outcome::Broken(format!("step {k}: UNSTABLE but positions changed"));
+                    return Outcome::Broken(format!("step {}: UNSTABLE but positions changed", k + 1));
                 }
-                return Outcome::Unstable(format!("step {k}: {}", short(&message)));
+                return Outcome::Unstable(format!("step {}: {}", k + 1, short(&message)));
             }
-            Err(f) => return Outcome::Broken(format!("step {k}: {:?}: {}", f.0, f.1)),
+            Err(f) => return Outcome::Broken(format!("step {}: {:?}: {}", k + 1, f.0, f.1)),
         }
     }
     let s = last.unwrap();
@@ -145,11 +146,12 @@ fn anisotropic_run(p: &[f32], t: &[u32], def: &SoftshellShellDef, region: &[u32]
         match shell.step() {
             Ok(stats) => {
                 if !stats.volume_ratio.is_finite() || max_abs(&shell.positions()) > BOUND {
-                    return Outcome::Broken(format!("step {k}: not finite or not bounded"));
+                    return Outcome::Broken(format!("step {}: not finite or not bounded", k + 1));
                 }
                 if stats.volume_ratio < 0.0 {
                     return Outcome::Broken(format!(
-                        "step {k}: the shell turned inside out (V/V0 = {:.3}) and the step returned OK",
+                        "step {}: the shell turned inside out (V/V0 = {:.3}) and the step returned OK",
+                        k + 1,
                         stats.volume_ratio
                     ));
                 }
@@ -157,11 +159,11 @@ fn anisotropic_run(p: &[f32], t: &[u32], def: &SoftshellShellDef, region: &[u32]
             }
             Err((SoftshellStatus::Unstable, m)) => {
                 if bits(&shell.positions()) != before {
-                    return Outcome::Broken(format!("step {k}: UNSTABLE but positions changed"));
+                    return Outcome::Broken(format!("step {}: UNSTABLE but positions changed", k + 1));
                 }
-                return Outcome::Unstable(format!("step {k}: {}", short(&m)));
+                return Outcome::Unstable(format!("step {}: {}", k + 1, short(&m)));
             }
-            Err(f) => return Outcome::Broken(format!("step {k}: {:?}: {}", f.0, f.1)),
+            Err(f) => return Outcome::Broken(format!("step {}: {:?}: {}", k + 1, f.0, f.1)),
         }
     }
     Outcome::Stable(format!("V/V0 {:.3}", last.unwrap().volume_ratio))
@@ -351,11 +353,11 @@ pub fn run_body(
                     .iter()
                     .all(|v| v.is_finite());
                 if !finite || max_abs(&p) > BOUND || max_abs(&body.velocities()).is_infinite() {
-                    return Outcome::Broken(format!("step {k}: not finite or not bounded: {stats:?}"));
+                    return Outcome::Broken(format!("step {}: not finite or not bounded: {stats:?}", k + 1));
                 }
                 let t = body.triangles();
                 if t.iter().any(|&v| v as usize >= p.len() / 3) {
-                    return Outcome::Broken(format!("step {k}: a triangle index is out of range"));
+                    return Outcome::Broken(format!("step {}: a triangle index is out of range", k + 1));
                 }
                 broken += stats.springs_broken;
                 clamped |= stats.volume_clamped;
@@ -363,11 +365,11 @@ pub fn run_body(
             }
             Err((SoftshellStatus::Unstable, message)) => {
                 if bits(&body.positions()) != p0 || bits(&body.velocities()) != v0 {
-                    return Outcome::Broken(format!("step {k}: UNSTABLE but the state changed"));
+                    return Outcome::Broken(format!("step {}: UNSTABLE but the state changed", k + 1));
                 }
-                return Outcome::Unstable(format!("step {k}: {}", short(&message)));
+                return Outcome::Unstable(format!("step {}: {}", k + 1, short(&message)));
             }
-            Err(f) => return Outcome::Broken(format!("step {k}: {:?}: {}", f.0, f.1)),
+            Err(f) => return Outcome::Broken(format!("step {}: {:?}: {}", k + 1, f.0, f.1)),
         }
     }
     let s = last.unwrap();
@@ -546,17 +548,17 @@ pub fn run_lattice(def: &SoftshellLatticeDef, steps: usize, setup: &dyn Fn(&Latt
                     || !stats.kinetic_energy.is_finite()
                     || max_abs(&lattice.positions()) > 1e12
                 {
-                    return Outcome::Broken(format!("step {k}: not finite: {stats:?}"));
+                    return Outcome::Broken(format!("step {}: not finite: {stats:?}", k + 1));
                 }
                 last = Some(stats);
             }
             Err((SoftshellStatus::Unstable, message)) => {
                 if bits(&lattice.positions()) != p0 {
-                    return Outcome::Broken(format!("step {k}: UNSTABLE but positions changed"));
+                    return Outcome::Broken(format!("step {}: UNSTABLE but positions changed", k + 1));
                 }
-                return Outcome::Unstable(format!("step {k}: {}", short(&message)));
+                return Outcome::Unstable(format!("step {}: {}", k + 1, short(&message)));
             }
-            Err(f) => return Outcome::Broken(format!("step {k}: {:?}: {}", f.0, f.1)),
+            Err(f) => return Outcome::Broken(format!("step {}: {:?}: {}", k + 1, f.0, f.1)),
         }
     }
     let s = last.unwrap();
