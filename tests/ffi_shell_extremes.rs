@@ -63,8 +63,39 @@ fn a_step_that_diverges_with_collisions_on_is_rolled_back() {
         let (status, message, unchanged) = diverging_step(collisions);
         assert_eq!(status, SoftshellStatus::Unstable, "collisions {collisions}: {message}");
         assert!(message.contains("would be stable"), "collisions {collisions}: no advice in {message:?}");
+        // Each piece of advice once, each sentence ended (a review read "... through itself Turn
+        // collisions on ..." with stop_volume_ratio advised twice).
+        assert!(message.matches("stop_volume_ratio").count() <= 1, "advice repeated: {message:?}");
+        assert!(!message.contains("itself Turn") && !message.contains("stable Turn"), "{message:?}");
         assert!(unchanged, "collisions {collisions}: the failed step changed or poisoned the shell");
     }
+}
+
+/// A shell that a huge pressure turns inside out in its first step, collisions off: the message
+/// says what would be stable and what prevents the inversion, each once, in whole sentences.
+#[test]
+fn an_inverted_shell_is_told_each_remedy_once() {
+    let mesh = load_data_mesh("sphere.obj");
+    let mut def = softshell_shell_def_default();
+    def.pressure = 4e3;
+    def.collisions = false;
+    def.stop_volume_ratio = 0.0;
+    let mut shell = null_mut();
+    // SAFETY: live mesh, valid def, writable out pointer; the shell is freed below.
+    let (status, message) = unsafe {
+        assert_eq!(softshell_shell_new(mesh, &def, &mut shell), SoftshellStatus::Ok, "{}", last_error());
+        let status = softshell_shell_step(shell, null_mut());
+        let message = last_error();
+        softshell_shell_free(shell);
+        softshell_mesh_free(mesh);
+        (status, message)
+    };
+    assert_eq!(status, SoftshellStatus::Unstable, "{message}");
+    assert!(message.contains("inside out"), "not the inversion: {message}");
+    assert!(message.contains("would be stable") && message.contains("Turn collisions on"), "{message}");
+    assert_eq!(message.matches("stop_volume_ratio").count(), 1, "advice repeated: {message}");
+    // Every capitalised advice starts a sentence.
+    assert!(!message.contains("itself Turn") && !message.contains("stable Turn"), "{message}");
 }
 
 #[test]

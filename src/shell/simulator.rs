@@ -650,8 +650,7 @@ impl State {
             // never below the shortest step (a review saw "a time_step of at most 7.1e-7 s").
             format!(
                 "The pressure alone moves a vertex {:.3e} m per substep against a mean edge of {:.3e} m: {} or a \
-                 pressure of at most {:.3e} Pa would be stable; without collisions keep stop_volume_ratio above 0 \
-                 so the run ends before the surface passes through itself",
+                 pressure of at most {:.3e} Pa would be stable.",
                 substep * substep * pressure / areal_mass,
                 self.mean_edge,
                 substeps_advice(step, stable_step),
@@ -662,9 +661,9 @@ impl State {
             // not read Young's modulus).
             let shorter = substeps_advice(step, substep / 4.0);
             if settings.solver == SolverKind::Xpbd {
-                format!("{shorter} or a lower Young's modulus than {} Pa would be stable", settings.youngs_modulus)
+                format!("{shorter} or a lower Young's modulus than {} Pa would be stable.", settings.youngs_modulus)
             } else {
-                format!("{shorter} would be stable (the PBD solvers do not read Young's modulus)")
+                format!("{shorter} would be stable (the PBD solvers do not read Young's modulus).")
             }
         };
         Error::new(
