@@ -762,7 +762,9 @@ size_t softshell_body_fragment_count(const struct SoftshellBody *body);
 // start, with room for an eighth more vertices, edges and faces, so that the topology update
 // of a step that cracks within that room allocates no large array; the springs, the gas and
 // the solver's per-vertex buffers are still rebuilt or grown after a crack, so the figure can
-// rise then. 0 for NULL.
+// rise then. A step that changes no topology allocates nothing once the body has taken its
+// first steps (its scratch is sized by them); on several threads the implicit integrator's
+// solve still asks the thread pool for one small job record per substep. 0 for NULL.
 //
 // # Safety
 // `body` must be NULL or a live body.
@@ -1023,7 +1025,7 @@ size_t softshell_lattice_triangle_count(const struct SoftshellLattice *lattice);
 
 // Heap bytes the lattice holds (the worker threads and the thread pool's own bookkeeping, inside
 // rayon, excluded); 0 for NULL. Storage for region damping, pins and forces exists only when
-// they are used.
+// they are used. A step allocates nothing (its scratch is made with the lattice).
 //
 // # Safety
 // `lattice` must be NULL or a live lattice.
@@ -1352,10 +1354,12 @@ SoftshellStatus softshell_shell_copy_vertex_curvature(const struct SoftshellShel
                                                       size_t *out_len);
 
 // Bytes held by the shell: its handle, rest data, state and scratch (the worker threads and the
-// thread pool's own bookkeeping, inside rayon, excluded; the collision BVHs' size is estimated).
+// thread pool's own bookkeeping, inside rayon, excluded).
 // Only what the scene uses is allocated: no bending data with `SOFTSHELL_BENDING_NONE`, no
 // anisotropy data before a region is added, no multipliers with the PBD solver, no pool with
-// `threads = 1`. 0 for NULL.
+// `threads = 1`. A step allocates nothing without collisions; with them it only grows the
+// contact buffers (cached pairs, contacts, CCD search queues) to the largest contact set so
+// far, so this figure can rise while the shell contracts. 0 for NULL.
 //
 // # Safety
 // `shell` must be NULL or a live shell.

@@ -135,7 +135,7 @@ impl WorkerPool {
     ) {
         let chunk_len = chunk_len.max(1);
         #[cfg(feature = "parallel")]
-        if self.pool.is_some() {
+        if self.pool.is_some() && data.len() > chunk_len {
             use rayon::prelude::*;
             return self.install(|| data.par_chunks_mut(chunk_len).enumerate().for_each(|(i, c)| f(i, c)));
         }
@@ -341,7 +341,29 @@ struct TeamSync {
     park: std::sync::Mutex<()>,
     wake: std::sync::Condvar,
     /// Per member: `pass << 32 | next item`.
-    claims: Vec<Padded<AtomicU64>>,
+    claims: Claims,
+}
+
+/// Teams of up to this many members keep their claim counters inline (a team is made per
+/// solve, and a vector was an allocation per step).
+const INLINE_MEMBERS: usize = 4;
+
+/// The members' claim counters ([`TeamSync::claims`]). (Its inline variant is the larger by
+/// design: it lives on the stack of [`WorkerPool::team_of`] for one region.)
+#[allow(clippy::large_enum_variant)]
+enum Claims {
+    Inline([Padded<AtomicU64>; INLINE_MEMBERS]),
+    Heap(Vec<Padded<AtomicU64>>),
+}
+
+impl std::ops::Index<usize> for Claims {
+    type Output = Padded<AtomicU64>;
+    fn index(&self, member: usize) -> &Padded<AtomicU64> {
+        match self {
+            Claims::Inline(claims) => &claims[member],
+            Claims::Heap(claims) => &claims[member],
+        }
+    }
 }
 
 /// A value alone on its cache lines (members spinning on one do not slow the others' writes).
@@ -360,7 +382,11 @@ impl TeamSync {
             long_waits: AtomicUsize::new(0),
             park: std::sync::Mutex::new(()),
             wake: std::sync::Condvar::new(),
-            claims: (0..size).map(|_| Padded(AtomicU64::new(0))).collect(),
+            claims: if size <= INLINE_MEMBERS {
+                Claims::Inline(std::array::from_fn(|_| Padded(AtomicU64::new(0))))
+            } else {
+                Claims::Heap((0..size).map(|_| Padded(AtomicU64::new(0))).collect())
+            },
         }
     }
 

@@ -520,7 +520,14 @@ mod tests {
     fn aggregates_cover_every_vertex_and_the_coarse_operator_is_symmetric_positive() {
         let (x, springs, mass) = grid(12);
         let settings = BodySettings::default();
-        let model = Model { settings: &settings, triangles: &[], springs: &springs, mass: &mass, inv_mass: &mass };
+        let model = Model {
+            settings: &settings,
+            triangles: &[],
+            springs: &springs,
+            mass: &mass,
+            inv_mass: &mass,
+            wind_force: &[],
+        };
         let mut coarse = CoarseSpace::new(&model, &x, 1.0 / 60.0, 1).unwrap();
         let n = x.len();
         let count = coarse.restricted.len();

@@ -6,7 +6,7 @@ use glam::Vec3;
 
 use super::gas::{FACE_CHUNK, Gas};
 use super::springs::{Springs, spring_extension};
-use crate::parallel::WorkerPool;
+use crate::parallel::{SharedSlice, WorkerPool};
 
 /// Kinetic energy `Σ m v²/2`, J ([`lane_sum`]).
 pub(crate) fn kinetic(mass: &[f32], v: &[Vec3]) -> f64 {
@@ -205,14 +205,30 @@ impl SpringEnergyLanes {
 /// Vertices per chunk of [`state_energies`].
 pub(crate) const VERTEX_CHUNK: usize = 4096;
 
-/// The gas of a state for [`state_energies`]: the gas, its fragments' origins
-/// ([`Gas::origins`]) and the triangles.
-pub(crate) type GasState<'a> = (&'a Gas, &'a [glam::DVec3], &'a [[u32; 3]]);
+/// The gas of a state for [`state_energies`]: the gas and the triangles.
+pub(crate) type GasState<'a> = (&'a Gas, &'a [[u32; 3]]);
+
+/// The buffers of [`state_energies`], kept by the body between calls (a vector of tasks and
+/// one of sums per face chunk were allocated by every call, every step).
+#[derive(Debug, Default)]
+pub(crate) struct EnergySums {
+    /// Per task (vertex chunks, then spring chunks, then face chunks): its two sums (kinetic and
+    /// gravitational energy, or spring energy and the largest strain).
+    parts: Vec<(f64, f64)>,
+    /// Per face chunk, `max(fragments, 1)` parts of 6 V ([`Gas::finish_face_chunks`]).
+    pub six_v: Vec<f64>,
+}
+
+impl EnergySums {
+    pub fn memory_bytes(&self) -> usize {
+        self.parts.capacity() * 16 + self.six_v.capacity() * 8
+    }
+}
 
 /// The energies of a state in one parallel pass (one fork for all of them): kinetic, spring and
-/// gravitational energy (J), the largest spring strain, and the face chunks' parts of each gas
-/// fragment's 6 V for [`Gas::finish_face_chunks`] (empty without gas). The sums do not depend on
-/// the thread count (fixed chunks, added in order).
+/// gravitational energy (J) and the largest spring strain; with a gas, the face chunks' parts of
+/// each fragment's 6 V are left in `sums.six_v` for [`Gas::finish_face_chunks`]. The sums do not
+/// depend on the thread count (fixed chunks, added in order).
 pub(crate) fn state_energies(
     pool: &WorkerPool,
     springs: &Springs,
@@ -220,47 +236,41 @@ pub(crate) fn state_energies(
     ks: f32,
     g: Vec3,
     gas: Option<GasState>,
-) -> (f64, f64, f64, f32, Vec<Vec<f64>>) {
-    enum Part {
-        Springs(usize, f64, f32),
-        Vertices(usize, f64, f64),
-        Faces(usize, Vec<f64>),
-    }
-    let mut parts: Vec<Part> = (0..x.len().div_ceil(VERTEX_CHUNK)).map(|c| Part::Vertices(c, 0.0, 0.0)).collect();
-    parts.extend((0..springs.len().div_ceil(SPRING_CHUNK)).map(|c| Part::Springs(c, 0.0, 0.0)));
-    if let Some((gas, _, triangles)) = gas {
-        parts
-            .extend((0..triangles.len().div_ceil(FACE_CHUNK)).map(|c| Part::Faces(c, vec![0.0; gas.fragment_count()])));
-    }
-    pool.for_each_task(&mut parts, |part| match part {
-        Part::Springs(c, energy, strain) => (*energy, *strain) = spring_chunk(springs, x, ks, *c),
-        Part::Vertices(c, kinetic_energy, gravity_energy) => {
-            let range = *c * VERTEX_CHUNK..((*c + 1) * VERTEX_CHUNK).min(x.len());
-            *kinetic_energy = kinetic(&mass[range.clone()], &v[range.clone()]);
-            *gravity_energy = gravity(&mass[range.clone()], &x[range], g);
-        }
-        Part::Faces(c, six_v) => {
-            if let Some((gas, origin, triangles)) = gas {
-                gas.face_chunk_volumes(x, origin, triangles, *c, six_v);
-            }
+    sums: &mut EnergySums,
+) -> (f64, f64, f64, f32) {
+    let vertex_chunks = x.len().div_ceil(VERTEX_CHUNK);
+    let spring_chunks = springs.len().div_ceil(SPRING_CHUNK);
+    let face_chunks = gas.map_or(0, |(_, triangles)| triangles.len().div_ceil(FACE_CHUNK));
+    let fragments = gas.map_or(1, |(gas, _)| gas.fragment_count().max(1));
+    sums.parts.clear();
+    sums.parts.resize(vertex_chunks + spring_chunks + face_chunks, (0.0, 0.0));
+    sums.six_v.clear();
+    sums.six_v.resize(face_chunks * fragments, 0.0);
+    let six_v = SharedSlice::new(&mut sums.six_v);
+    pool.for_each_chunk_mut(&mut sums.parts, 1, |task, part| {
+        if task < vertex_chunks {
+            let range = task * VERTEX_CHUNK..((task + 1) * VERTEX_CHUNK).min(x.len());
+            part[0] = (kinetic(&mass[range.clone()], &v[range.clone()]), gravity(&mass[range.clone()], &x[range], g));
+        } else if task < vertex_chunks + spring_chunks {
+            let (energy, strain) = spring_chunk(springs, x, ks, task - vertex_chunks);
+            part[0] = (energy, strain as f64);
+        } else if let Some((gas, triangles)) = gas {
+            let c = task - vertex_chunks - spring_chunks;
+            // SAFETY: face chunk c's parts, written by this task alone.
+            let parts = unsafe { six_v.part(c * fragments..(c + 1) * fragments) };
+            gas.face_chunk_volumes(x, triangles, c, parts);
         }
     });
     let (mut kinetic_energy, mut spring, mut gravity_energy, mut max_strain) = (0.0, 0.0, 0.0, 0.0f32);
-    let mut faces = Vec::new();
-    for part in parts {
-        match part {
-            Part::Springs(_, energy, strain) => {
-                spring += energy;
-                max_strain = max_strain.max(strain);
-            }
-            Part::Vertices(_, k, g) => {
-                kinetic_energy += k;
-                gravity_energy += g;
-            }
-            Part::Faces(_, six_v) => faces.push(six_v),
-        }
+    for &(k, g) in &sums.parts[..vertex_chunks] {
+        kinetic_energy += k;
+        gravity_energy += g;
     }
-    (kinetic_energy, spring, gravity_energy, max_strain, faces)
+    for &(energy, strain) in &sums.parts[vertex_chunks..vertex_chunks + spring_chunks] {
+        spring += energy;
+        max_strain = max_strain.max(strain as f32);
+    }
+    (kinetic_energy, spring, gravity_energy, max_strain)
 }
 
 /// Gravitational energy `-Σ m g·x`, J.

@@ -6,7 +6,6 @@ use glam::Vec3;
 use super::gas::Gas;
 use super::settings::BodySettings;
 use super::springs::{Springs, spring_force};
-use super::wind::{DragState, add_wind};
 
 /// What the force loops read from a body (borrowed for one substep).
 pub(crate) struct Model<'a> {
@@ -15,6 +14,10 @@ pub(crate) struct Model<'a> {
     pub springs: &'a Springs,
     pub mass: &'a [f32],
     pub inv_mass: &'a [f32],
+    /// The wind's force on each vertex at the start of the substep (empty without wind):
+    /// `Body::substep` measures it once, for the wind's work and for the integrator, where both
+    /// measured it (and allocated a per-vertex buffer for it) each substep.
+    pub wind_force: &'a [Vec3],
 }
 
 impl Model<'_> {
@@ -25,15 +28,19 @@ impl Model<'_> {
 }
 
 /// Gravity and wind into `f` (overwritten); returns the wind power, W.
-pub(crate) fn external_forces(model: &Model, x: &[Vec3], v: &[Vec3], f: &mut [Vec3]) -> f64 {
+pub(crate) fn external_forces(model: &Model, v: &[Vec3], f: &mut [Vec3]) -> f64 {
     let g = model.settings.gravity;
     for (fi, &m) in f.iter_mut().zip(model.mass) {
         *fi = g * m;
     }
     if model.has_wind() {
-        let h = model.settings.time_step / model.settings.substeps.max(1) as f32;
-        let state = DragState { x, v, triangles: model.triangles, mass: model.mass, h };
-        add_wind(&state, model.settings.wind, model.settings.drag, f)
+        debug_assert_eq!(model.wind_force.len(), f.len(), "the wind is measured at the substep's start");
+        let mut power = 0.0f64;
+        for ((fi, &wind), vi) in f.iter_mut().zip(model.wind_force).zip(v) {
+            *fi += wind;
+            power += wind.dot(*vi) as f64;
+        }
+        power
     } else {
         0.0
     }
@@ -89,7 +96,7 @@ pub(crate) fn all_forces(
     gradient: &mut [Vec3],
     f: &mut [Vec3],
 ) -> f64 {
-    let power = external_forces(model, x, v, f);
+    let power = external_forces(model, v, f);
     add_spring_forces(model, x, v, f);
     if let Some(gas) = gas {
         add_gas_forces(model, gas, x, gradient, f);

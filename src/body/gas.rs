@@ -147,10 +147,23 @@ fn face_term(o: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f64 {
     ((ax * cx + ay * cy) + az * cz) as f64
 }
 
+/// The origin of each fragment's volume sums by fragment ([`Gas::origin_of`]).
+trait Origin: Fn(usize) -> DVec3 + Copy {}
+impl<F: Fn(usize) -> DVec3 + Copy> Origin for F {}
+
+/// The origin of fragment `f`'s volume sums: one of its vertices, `reference[f]` (accuracy
+/// only; the origin of a fragment without vertices is never used). Read where it is used
+/// rather than gathered into a vector: that was an allocation per force evaluation.
+#[inline]
+pub fn origin_of(reference: &[u32], x: &[Vec3], f: usize) -> DVec3 {
+    let v = reference[f];
+    if v == u32::MAX { DVec3::ZERO } else { x[v as usize].as_dvec3() }
+}
+
 /// Adds each face's `6 V` term ([`face_term`], with its fragment's origin) into `six_v`, in
 /// face order ([`TetSums`]): eight faces at a time with AVX2 where the processor has it (the
 /// same operations in the same order and the same sums, so the same bits, tested).
-fn add_face_tets(x: &[Vec3], origin: &[DVec3], faces: &[[u32; 3]], face_fragment: &[u32], six_v: &mut [f64]) {
+fn add_face_tets(x: &[Vec3], origin: impl Origin, faces: &[[u32; 3]], face_fragment: &[u32], six_v: &mut [f64]) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2 (checked just above).
@@ -160,7 +173,7 @@ fn add_face_tets(x: &[Vec3], origin: &[DVec3], faces: &[[u32; 3]], face_fragment
     add_face_tets_scalar(x, origin, faces, face_fragment, six_v);
 }
 
-fn add_face_tets_scalar(x: &[Vec3], origin: &[DVec3], faces: &[[u32; 3]], face_fragment: &[u32], six_v: &mut [f64]) {
+fn add_face_tets_scalar(x: &[Vec3], origin: impl Origin, faces: &[[u32; 3]], face_fragment: &[u32], six_v: &mut [f64]) {
     let mut sums = TetSums::default();
     add_face_tets_from(&mut sums, 0, x, origin, faces, face_fragment, six_v);
     sums.flush(six_v);
@@ -171,13 +184,13 @@ fn add_face_tets_from(
     sums: &mut TetSums,
     first: usize,
     x: &[Vec3],
-    origin: &[DVec3],
+    origin: impl Origin,
     faces: &[[u32; 3]],
     face_fragment: &[u32],
     six_v: &mut [f64],
 ) {
     for (k, (t, &frag)) in faces.iter().zip(face_fragment).enumerate() {
-        let o = origin[frag as usize].as_vec3();
+        let o = origin(frag as usize).as_vec3();
         let term = face_term(o, x[t[0] as usize], x[t[1] as usize], x[t[2] as usize]);
         sums.add(first + k, frag, term, six_v);
     }
@@ -272,7 +285,7 @@ unsafe fn face_corners(
 #[target_feature(enable = "avx2")]
 unsafe fn add_face_tets_avx2(
     x: &[Vec3],
-    origin: &[DVec3],
+    origin: impl Origin,
     faces: &[[u32; 3]],
     face_fragment: &[u32],
     six_v: &mut [f64],
@@ -306,10 +319,10 @@ unsafe fn add_face_tets_avx2(
         let one_fragment = frags[1..].iter().all(|&f| f == frags[0]);
         let (ox, oy, oz) = if one_fragment {
             // One fragment (nearly always): its origin in every lane.
-            let o = origin[frags[0] as usize].as_vec3();
+            let o = origin(frags[0] as usize).as_vec3();
             (_mm256_set1_ps(o.x), _mm256_set1_ps(o.y), _mm256_set1_ps(o.z))
         } else {
-            let o: [Vec3; 8] = std::array::from_fn(|lane| origin[frags[lane] as usize].as_vec3());
+            let o: [Vec3; 8] = std::array::from_fn(|lane| origin(frags[lane] as usize).as_vec3());
             (
                 _mm256_setr_ps(o[0].x, o[1].x, o[2].x, o[3].x, o[4].x, o[5].x, o[6].x, o[7].x),
                 _mm256_setr_ps(o[0].y, o[1].y, o[2].y, o[3].y, o[4].y, o[5].y, o[6].y, o[7].y),
@@ -539,77 +552,91 @@ impl Gas {
     /// SPEC 2.1/2.4: capped volume and hole area of every fragment, then the pressure
     /// `P = nRT / max(V, v_min)` (SPEC 2.2 clamp; `clamped` reports it).
     pub fn measure(&mut self, x: &[Vec3], triangles: &[[u32; 3]]) {
-        let origin = self.origins(x);
-        let mut six_v = vec![0.0f64; self.fragment_count()];
-        let face_fragment = &self.face_fragment;
+        // 6 V summed in place in `volume` (no buffer per call: see `Gas::finish`).
+        self.volume.fill(0.0);
+        let reference = &self.reference_vertex;
         // (Eight faces at a time with AVX2: a topology change measures its new fragments here,
         // about 0.2 ms one face at a time on the issue-5 balloon's first cracking step.)
-        add_face_tets(x, &origin, triangles, face_fragment, &mut six_v);
-        self.finish(x, &origin, six_v);
+        add_face_tets(x, |f| origin_of(reference, x, f), triangles, &self.face_fragment, &mut self.volume);
+        self.finish(x);
     }
 
     /// [`Gas::measure`] and [`Gas::volume_gradient`] in one pass over the faces (the cross
     /// products of the volume are the gradient): what each force evaluation needs.
     pub fn measure_with_gradient(&mut self, x: &[Vec3], triangles: &[[u32; 3]], out: &mut [Vec3]) {
         out.iter_mut().for_each(|g| *g = Vec3::ZERO);
-        let origin = self.origins(x);
-        let mut six_v = vec![0.0f64; self.fragment_count()];
+        let six_v = &mut self.volume;
+        six_v.fill(0.0);
+        // Per run of faces of one fragment (runs are long: nearly always one fragment), its
+        // origin, whether it holds gas, and its running 6 V in a local (the same additions in
+        // the same order as into the slice, so the same bits).
+        let (mut last, mut o, mut has_gas, mut sum) = (u32::MAX, DVec3::ZERO, false, 0.0f64);
         for (t, &frag) in triangles.iter().zip(&self.face_fragment) {
-            let o = origin[frag as usize];
+            if frag != last {
+                if last != u32::MAX {
+                    six_v[last as usize] = sum;
+                }
+                last = frag;
+                o = origin_of(&self.reference_vertex, x, frag as usize);
+                has_gas = self.n_rt[frag as usize] > 0.0;
+                sum = six_v[frag as usize];
+            }
             // Spelled out rather than `t.map(..)`: the array map was once left as a call that
             // went through the stack and doubled the cost of this loop (XPBD, explicit).
             let p = [x[t[0] as usize].as_dvec3() - o, x[t[1] as usize].as_dvec3() - o, x[t[2] as usize].as_dvec3() - o];
             let across = p[1].cross(p[2]);
-            six_v[frag as usize] += p[0].dot(across);
-            if self.n_rt[frag as usize] > 0.0 {
+            sum += p[0].dot(across);
+            if has_gas {
                 // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
                 out[t[0] as usize] += (across * SIXTH).as_vec3();
                 out[t[1] as usize] += (p[2].cross(p[0]) * SIXTH).as_vec3();
                 out[t[2] as usize] += (p[0].cross(p[1]) * SIXTH).as_vec3();
             }
         }
+        if last != u32::MAX {
+            six_v[last as usize] = sum;
+        }
         self.cap_gradient(x, out);
-        self.finish(x, &origin, six_v);
+        self.finish(x);
     }
 
     /// [`Gas::measure`] in parallel fixed chunks of faces (the volumes differ in rounding only).
     #[cfg(test)]
     pub fn measure_parallel(&mut self, pool: &WorkerPool, x: &[Vec3], triangles: &[[u32; 3]]) {
-        let origin = self.origins(x);
-        let fragments = self.fragment_count();
+        let fragments = self.fragment_count().max(1);
         let parts = pool.map_collect(triangles.len().div_ceil(FACE_CHUNK), |c| {
             let mut six_v = vec![0.0f64; fragments];
-            self.face_chunk_volumes(x, &origin, triangles, c, &mut six_v);
+            self.face_chunk_volumes(x, triangles, c, &mut six_v);
             six_v
         });
-        self.finish_face_chunks(x, &origin, &parts);
+        self.finish_face_chunks(x, &parts.concat());
     }
 
     /// Face chunk `c`'s part of 6 V per fragment into `six_v` (the parallel form of
     /// [`Gas::measure`]: every chunk, in any order or at the same time, then
     /// [`Gas::finish_face_chunks`]).
-    pub fn face_chunk_volumes(
-        &self,
-        x: &[Vec3],
-        origin: &[DVec3],
-        triangles: &[[u32; 3]],
-        c: usize,
-        six_v: &mut [f64],
-    ) {
+    pub fn face_chunk_volumes(&self, x: &[Vec3], triangles: &[[u32; 3]], c: usize, six_v: &mut [f64]) {
         let range = c * FACE_CHUNK..((c + 1) * FACE_CHUNK).min(triangles.len());
         six_v.fill(0.0);
-        add_face_tets(x, origin, &triangles[range.clone()], &self.face_fragment[range], six_v);
+        let reference = &self.reference_vertex;
+        add_face_tets(x, |f| origin_of(reference, x, f), &triangles[range.clone()], &self.face_fragment[range], six_v);
     }
 
-    /// Volumes, hole areas and pressures from the face chunks' parts (in chunk order).
-    pub fn finish_face_chunks(&mut self, x: &[Vec3], origin: &[DVec3], parts: &[Vec<f64>]) {
-        let mut six_v = vec![0.0f64; self.fragment_count()];
-        for part in parts {
-            for (total, value) in six_v.iter_mut().zip(part) {
+    /// Volumes, hole areas and pressures from the face chunks' parts (`parts`: `max(fragments,
+    /// 1)` per chunk of [`FACE_CHUNK`] faces, in chunk order).
+    pub fn finish_face_chunks(&mut self, x: &[Vec3], parts: &[f64]) {
+        self.sum_face_chunks(parts);
+        self.finish(x);
+    }
+
+    /// 6 V per fragment into `volume`: the face chunks' parts added in chunk order.
+    fn sum_face_chunks(&mut self, parts: &[f64]) {
+        self.volume.fill(0.0);
+        for part in parts.chunks_exact(self.fragment_count().max(1)) {
+            for (total, value) in self.volume.iter_mut().zip(part) {
                 *total += value;
             }
         }
-        self.finish(x, origin, six_v);
     }
 
     /// [`Gas::measure_with_gradient`] in parallel chunks: each vertex gathers the gradient terms
@@ -624,27 +651,19 @@ impl Gas {
         out: &mut [Vec3],
     ) {
         let n = out.len();
-        let origin = self.prepare_gradient(x, triangles, n);
+        self.prepare_corners(triangles, n);
         let fragments = self.fragment_count().max(1);
         let face_chunks = triangles.len().div_ceil(FACE_CHUNK);
         let mut chunk_six_v = std::mem::take(&mut self.chunk_six_v);
         chunk_six_v.clear();
         chunk_six_v.resize(face_chunks * fragments, 0.0);
         let this = &*self;
-        let mut rows: Vec<(usize, &mut [Vec3])> = out.chunks_mut(VERTEX_CHUNK).enumerate().collect();
-        pool.for_each_task(&mut rows, |(c, out)| this.gradient_rows(x, &origin, *c * VERTEX_CHUNK, out));
-        let mut faces: Vec<(usize, &mut [f64])> = chunk_six_v.chunks_mut(fragments).enumerate().collect();
-        pool.for_each_task(&mut faces, |(c, six_v)| this.face_chunk_volumes(x, &origin, triangles, *c, six_v));
-        self.finish_gradient(x, &origin, &chunk_six_v, out);
+        pool.for_each_chunk_mut(out, VERTEX_CHUNK, |c, out| this.gradient_rows(x, c * VERTEX_CHUNK, out));
+        pool.for_each_chunk_mut(&mut chunk_six_v, fragments, |c, six_v| {
+            this.face_chunk_volumes(x, triangles, c, six_v)
+        });
+        self.finish_gradient(x, &chunk_six_v, out);
         self.chunk_six_v = chunk_six_v;
-    }
-
-    /// The start of the parallel gathering ([`Gas::gradient_rows`] on every chunk of vertices,
-    /// then [`Gas::finish_gradient`]): makes the corner lists on the first call after a topology
-    /// change (see [`Gas::prepare_corners`]); returns the fragments' origins.
-    pub fn prepare_gradient(&mut self, x: &[Vec3], triangles: &[[u32; 3]], n: usize) -> Vec<DVec3> {
-        self.prepare_corners(triangles, n);
-        self.origins(x)
     }
 
     /// Whether the corner lists are made for `n` vertices.
@@ -670,7 +689,7 @@ impl Gas {
     /// pass's instructions). Slices of eight vertices whose fans are closed rings with gas go
     /// eight at a time (`fan_rings`: on the issue-5 balloon the pass went from 420M to 165M
     /// instructions over 200 steps, callgrind, one thread).
-    pub fn gradient_rows(&self, x: &[Vec3], origin: &[DVec3], first: usize, out: &mut [Vec3]) {
+    pub fn gradient_rows(&self, x: &[Vec3], first: usize, out: &mut [Vec3]) {
         let mut k = 0;
         while k < out.len() {
             let v = first + k;
@@ -680,7 +699,7 @@ impl Gas {
                 k += SLICE;
                 continue;
             }
-            out[k] = self.vertex_gradient(x, origin, v);
+            out[k] = self.vertex_gradient(x, v);
             k += 1;
         }
     }
@@ -704,7 +723,7 @@ impl Gas {
     }
 
     /// `∂V/∂x_v` (without the caps' share) one vertex at a time.
-    fn vertex_gradient(&self, x: &[Vec3], origin: &[DVec3], v: usize) -> Vec3 {
+    fn vertex_gradient(&self, x: &[Vec3], v: usize) -> Vec3 {
         let fan = &self.corners[self.corner_offsets[v] as usize..self.corner_offsets[v + 1] as usize];
         if self.closed_fan[v] {
             // Around a closed ring `Σ (b - o)×(c - o) = Σ b×c` for any origin o, so the gradient
@@ -738,7 +757,7 @@ impl Gas {
         for corner in fan {
             let frag = corner.fragment as usize;
             if self.n_rt[frag] > 0.0 {
-                let o = origin[frag];
+                let o = origin_of(&self.reference_vertex, x, frag);
                 let (p1, p2) = (x[corner.next as usize].as_dvec3() - o, x[corner.prev as usize].as_dvec3() - o);
                 // ∂/∂a of a·(b×c)/6 = (b×c)/6, cyclic.
                 sum += (p1.cross(p2) * SIXTH).as_vec3();
@@ -751,16 +770,10 @@ impl Gas {
     /// `max(fragments, 1)` per chunk of [`FACE_CHUNK`] faces, in chunk order: the sums of
     /// [`Gas::finish_face_chunks`], to the bit) and the caps' share of the gradient `out`, and
     /// sets volumes, hole areas and pressures.
-    pub fn finish_gradient(&mut self, x: &[Vec3], origin: &[DVec3], chunk_six_v: &[f64], out: &mut [Vec3]) {
-        let fragments = self.fragment_count();
-        let mut six_v = vec![0.0f64; fragments];
-        for part in chunk_six_v.chunks_exact(fragments.max(1)) {
-            for (total, value) in six_v.iter_mut().zip(part) {
-                *total += value;
-            }
-        }
+    pub fn finish_gradient(&mut self, x: &[Vec3], chunk_six_v: &[f64], out: &mut [Vec3]) {
+        self.sum_face_chunks(chunk_six_v);
         self.cap_gradient(x, out);
-        self.finish(x, origin, six_v);
+        self.finish(x);
     }
 
     /// The corners at each vertex (CSR, faces ascending).
@@ -816,22 +829,15 @@ impl Gas {
             .collect();
     }
 
-    /// The origin of each fragment's volume sums: one of its vertices (accuracy only).
-    pub fn origins(&self, x: &[Vec3]) -> Vec<DVec3> {
-        self.reference_vertex
-            .iter()
-            .map(|&v| if v == u32::MAX { DVec3::ZERO } else { x[v as usize].as_dvec3() })
-            .collect()
-    }
-
-    /// Adds the caps to the face sums `six_v` (6 V per fragment) and sets volumes, hole areas and
+    /// Adds the caps to the face sums of 6 V per fragment (left in `volume` by the caller: a
+    /// buffer per call was an allocation per force evaluation) and sets volumes, hole areas and
     /// pressures.
-    fn finish(&mut self, x: &[Vec3], origin: &[DVec3], mut six_v: Vec<f64>) {
-        let n = self.fragment_count();
-        let mut open = vec![0.0f64; n];
+    fn finish(&mut self, x: &[Vec3]) {
+        let (six_v, open) = (&mut self.volume, &mut self.open_area);
+        open.fill(0.0);
         for cap in &self.caps {
             let f = cap.fragment as usize;
-            let (o, c) = (origin[f], ring_center(x, &cap.ring));
+            let (o, c) = (origin_of(&self.reference_vertex, x, f), ring_center(x, &cap.ring));
             for (k, &a) in cap.ring.iter().enumerate() {
                 let b = cap.ring[(k + 1) % cap.ring.len()];
                 let (pa, pb) = (x[a as usize].as_dvec3(), x[b as usize].as_dvec3());
@@ -839,9 +845,8 @@ impl Gas {
                 open[f] += 0.5 * (pa - c).cross(pb - c).length();
             }
         }
-        for f in 0..n {
-            self.volume[f] = six_v[f] / 6.0;
-            self.open_area[f] = open[f];
+        for six_v in six_v.iter_mut() {
+            *six_v /= 6.0;
         }
         self.refresh_pressures();
     }
@@ -870,10 +875,7 @@ impl Gas {
     pub fn volume_gradient(&self, x: &[Vec3], triangles: &[[u32; 3]], out: &mut [Vec3]) {
         let face_fragment = &self.face_fragment;
         out.iter_mut().for_each(|g| *g = Vec3::ZERO);
-        let origin = |f: usize| {
-            let v = self.reference_vertex[f];
-            if v == u32::MAX { DVec3::ZERO } else { x[v as usize].as_dvec3() }
-        };
+        let origin = |f: usize| origin_of(&self.reference_vertex, x, f);
         for (t, &frag) in triangles.iter().zip(face_fragment) {
             if self.n_rt[frag as usize] <= 0.0 {
                 continue;
@@ -890,10 +892,7 @@ impl Gas {
 
     /// The caps' share of `∂V/∂x`: each cap centre's gradient goes to its ring equally.
     fn cap_gradient(&self, x: &[Vec3], out: &mut [Vec3]) {
-        let origin = |f: usize| {
-            let v = self.reference_vertex[f];
-            if v == u32::MAX { DVec3::ZERO } else { x[v as usize].as_dvec3() }
-        };
+        let origin = |f: usize| origin_of(&self.reference_vertex, x, f);
         for cap in &self.caps {
             let f = cap.fragment as usize;
             if self.n_rt[f] <= 0.0 {
@@ -1267,8 +1266,8 @@ mod tests {
             let fragments: Vec<u32> = (0..faces.len()).map(fragment_of).collect();
             for first in [0, 1, 6] {
                 let (mut fast, mut plain) = ([0.0f64; 2], [0.0f64; 2]);
-                add_face_tets(&x, &origin, &faces[first..], &fragments[first..], &mut fast);
-                add_face_tets_scalar(&x, &origin, &faces[first..], &fragments[first..], &mut plain);
+                add_face_tets(&x, |f| origin[f], &faces[first..], &fragments[first..], &mut fast);
+                add_face_tets_scalar(&x, |f| origin[f], &faces[first..], &fragments[first..], &mut plain);
                 assert_eq!(fast.map(f64::to_bits), plain.map(f64::to_bits));
                 // And the sums are the faces' terms added one by one, up to rounding.
                 let (mut one_by_one, mut magnitude) = ([0.0f64; 2], [0.0f64; 2]);

@@ -1150,6 +1150,20 @@ struct Shared<'a> {
     coarse_own: SharedSlice<'a, Vec3A>,
     coarse_separator_parts: SharedSlice<'a, Vec3A>,
     coarse_dots: SharedSlice<'a, f64>,
+    /// Each member's per-fragment values ([`Shared::member_gas`]).
+    member_gas: SharedSlice<'a, f64>,
+    member_scale: SharedSlice<'a, f32>,
+}
+
+/// A team member's own per-fragment values of a substep: `Σ g·v`, `Σ g·p` and `Σ g·Δv`, and the gas
+/// scales of the products ([`gas_scale`]) and of the solution.
+struct MemberGas<'a> {
+    /// `Σ g·v` of the assembly.
+    dot_v: &'a mut [f64],
+    dot_p: &'a mut [f64],
+    dot_dv: &'a mut [f64],
+    scale: &'a mut [f32],
+    end_scale: &'a mut [f32],
 }
 
 /// Per-chunk sums of the team passes.
@@ -1176,6 +1190,11 @@ struct ChunkSums {
     coarse_dots: Vec<f64>,
     /// Per chunk of faces ([`gas::FACE_CHUNK`]) and fragment (at least one) the gas's 6 V.
     gas_six_v: Vec<f64>,
+    /// Per team member, its own copies of the solve's per-fragment values ([`MemberGas`]):
+    /// each member computes them itself (no barrier to hand them over), and vectors made per
+    /// iteration were allocations in the loop.
+    member_gas: Vec<f64>,
+    member_scale: Vec<f32>,
 }
 
 impl ChunkSums {
@@ -1197,6 +1216,12 @@ impl ChunkSums {
         self.coarse_dots.resize(3, 0.0);
     }
 
+    /// Room for [`MemberGas`] of `members` members and `fragments` fragments.
+    fn resize_member_gas(&mut self, members: usize, fragments: usize) {
+        self.member_gas.resize(members * 3 * fragments, 0.0);
+        self.member_scale.resize(members * 2 * fragments, 0.0);
+    }
+
     fn memory_bytes(&self) -> usize {
         (self.pap.capacity()
             + self.rr.capacity()
@@ -1204,8 +1229,10 @@ impl ChunkSums {
             + self.magnitude.capacity()
             + self.rhs.capacity()
             + self.gas_v.capacity()
-            + self.gas_six_v.capacity())
+            + self.gas_six_v.capacity()
+            + self.member_gas.capacity())
             * 8
+            + self.member_scale.capacity() * 4
             + self.contact.capacity()
             + self.largest_other.capacity() * 4
             + self.finite.capacity()
@@ -1216,6 +1243,22 @@ impl ChunkSums {
 }
 
 impl Shared<'_> {
+    /// This member's [`MemberGas`] for `fragments` fragments.
+    fn member_gas(&self, team: &Team, fragments: usize) -> MemberGas<'_> {
+        let (first, first_scale) = (team.index() * 3 * fragments, team.index() * 2 * fragments);
+        // SAFETY: each member's own ranges (sized for every member the pool can run), used by
+        // it alone, once per substep.
+        unsafe {
+            MemberGas {
+                dot_v: self.member_gas.part(first..first + fragments),
+                dot_p: self.member_gas.part(first + fragments..first + 2 * fragments),
+                dot_dv: self.member_gas.part(first + 2 * fragments..first + 3 * fragments),
+                scale: self.member_scale.part(first_scale..first_scale + fragments),
+                end_scale: self.member_scale.part(first_scale + fragments..first_scale + 2 * fragments),
+            }
+        }
+    }
+
     /// The coarse system for the current residual, solved together: members 0 and 1 restrict
     /// the residual to the rows of one half of the top dissection each, solve them forward in
     /// a copy of their own and add up their half's part of the top separator's rows; after a
@@ -1382,7 +1425,7 @@ impl Shared<'_> {
     /// and join per pass (four per iteration) to 2.03-2.07 ms (1.25-1.32); claiming instead of
     /// fixed blocks alone: 2.18-2.34 ms to 2.03-2.07 ms (the two cores of the test machine do not
     /// run equally fast).
-    fn solve(&self, team: &Team, input: &SolveInput) -> (usize, Vec<f64>) {
+    fn solve(&self, team: &Team, input: &SolveInput, own: &mut MemberGas) -> usize {
         let SolveInput { sys, contact, coupling, rhs, inv_diag, any_contact, fragments, tolerance, max_iterations } =
             *input;
         let Shared { dv, r, z, p, ap, gas, chunk_pap, chunk_rr, chunk_rz, .. } = self;
@@ -1390,11 +1433,12 @@ impl Shared<'_> {
         let chunks = n.div_ceil(CHUNK);
         let rows = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(n);
         {
-            let mut gas_dot = vec![0.0f64; fragments];
+            let MemberGas { dot_p: gas_dot, dot_dv: gas_dot_dv, scale, .. } = own;
+            debug_assert_eq!(gas_dot.len(), fragments);
             // SAFETY: nobody writes the gas sums (made by the assembly) in this pass.
-            sum_gas_partial(unsafe { gas.whole() }, &mut gas_dot);
-            let mut gas_dot_dv = gas_dot.clone();
-            let scale = gas_scale(sys, &gas_dot);
+            sum_gas_partial(unsafe { gas.whole() }, gas_dot);
+            gas_dot_dv.copy_from_slice(gas_dot);
+            gas_scale(sys, gas_dot, scale);
             // r = rhs - A Δv, z = M⁻¹ r: a member's rows of r need only its own rows of A Δv, so
             // no barrier between the two.
             team.claim(chunks, |c| {
@@ -1403,23 +1447,23 @@ impl Shared<'_> {
                     (ap.part(rows(c)), r.part(rows(c)), z.part(rows(c)), chunk_rz.part(c..c + 1), dv.whole())
                 };
                 let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
-                product_rows(sys, contact, coupling, dv_all, &scale, &mut task);
+                product_rows(sys, contact, coupling, dv_all, scale, &mut task);
                 sum[0] = initial_rows(c * CHUNK, (r_rows, z_rows), rhs, task.out, inv_diag, contact, any_contact);
             });
             team.barrier();
             // SAFETY: nobody writes the chunks' sums in this pass.
             let mut rz: f64 = unsafe { chunk_rz.whole() }.iter().sum();
             rz += self.coarse_part(team);
-            self.direction(team, input, 0.0, &mut gas_dot);
+            self.direction(team, input, 0.0, gas_dot);
             let mut iterations = 0;
             while iterations < max_iterations {
                 iterations += 1;
-                let scale = gas_scale(sys, &gas_dot);
+                gas_scale(sys, gas_dot, scale);
                 team.claim(chunks, |c| {
                     // SAFETY: this member's chunks of ap and of the sums; p is written by nobody.
                     let (out, sum, p_all) = unsafe { (ap.part(rows(c)), chunk_pap.part(c..c + 1), p.whole()) };
                     let mut task = ProductTask { first: c * CHUNK, out, dot: 0.0 };
-                    product_rows(sys, contact, coupling, p_all, &scale, &mut task);
+                    product_rows(sys, contact, coupling, p_all, scale, &mut task);
                     sum[0] = task.dot;
                 });
                 team.barrier();
@@ -1429,7 +1473,7 @@ impl Shared<'_> {
                     break;
                 }
                 let alpha = (rz / pap) as f32;
-                for (sum, &dot) in gas_dot_dv.iter_mut().zip(&gas_dot) {
+                for (sum, &dot) in gas_dot_dv.iter_mut().zip(gas_dot.iter()) {
                     *sum += alpha as f64 * dot;
                 }
                 // Fused: Δv and r updates, z = M⁻¹ r, and the two dot products in one pass.
@@ -1469,9 +1513,9 @@ impl Shared<'_> {
                 let beta = (rz_next / rz) as f32;
                 rz = rz_next;
                 // p = z + β p, with Σ g·p per gas fragment in the same pass.
-                self.direction(team, input, beta, &mut gas_dot);
+                self.direction(team, input, beta, gas_dot);
             }
-            (iterations, gas_dot_dv)
+            iterations
         }
     }
 }
@@ -1510,8 +1554,10 @@ impl GasRun {
 
 /// `h² P/V Σ g·p` per fragment (as f32, the factor of the gas term of each row of a product)
 /// from `Σ g·p` per fragment: once per product, not once per row.
-fn gas_scale(sys: &System, gas_dot: &[f64]) -> Vec<f32> {
-    sys.gas_coef.iter().zip(gas_dot).map(|(&coef, &dot)| (coef * dot) as f32).collect()
+fn gas_scale(sys: &System, gas_dot: &[f64], scale: &mut [f32]) {
+    for ((scale, &coef), &dot) in scale.iter_mut().zip(sys.gas_coef.iter()).zip(gas_dot.iter()) {
+        *scale = (coef * dot) as f32;
+    }
 }
 
 /// `Σ g·p` per fragment from the chunks' parts (in chunk order).
@@ -1559,7 +1605,7 @@ pub(crate) fn substep(
     let wind = model.has_wind();
     let power = if wind {
         s.force.resize(n, Vec3::ZERO);
-        external_forces(model, x, v, &mut s.force)
+        external_forces(model, v, &mut s.force)
     } else {
         s.force = Vec::new();
         0.0
@@ -1581,8 +1627,7 @@ pub(crate) fn substep(
         }
     };
     // The gas gradient: without wind the first pass of the team region below (after
-    // `prepare_gradient` here), with wind here with the external forces.
-    let mut gas_origin = Vec::new();
+    // `Gas::prepare_corners` here), with wind here with the external forces.
     let gradient_in_team = gas.is_some() && !wind;
     // What the last substep prepared for this one (see `Prepared`), if it still fits; this one
     // prepares the next unless there is wind (whose forces are measured here each time).
@@ -1603,7 +1648,7 @@ pub(crate) fn substep(
             gas.refresh_pressures();
             gas_coefficients(gas, &mut s.gas_coef);
         } else {
-            gas_origin = gas.prepare_gradient(x, model.triangles, n);
+            gas.prepare_corners(model.triangles, n);
         }
         s.gas_dot.resize(frags, 0.0);
     }
@@ -1648,6 +1693,7 @@ pub(crate) fn substep(
     let face_chunks = model.triangles.len().div_ceil(gas::FACE_CHUNK);
     s.gas_partial.resize(chunks * fragments, 0.0);
     s.sums.resize(chunks, fragments);
+    s.sums.resize_member_gas(pool.threads().max(1), fragments);
     s.sums.gas_six_v.clear();
     s.sums.gas_six_v.resize(face_chunks * fragments.max(1), 0.0);
     if reuse {
@@ -1708,6 +1754,8 @@ pub(crate) fn substep(
         coarse_own: SharedSlice::new(coarse_own),
         coarse_separator_parts: SharedSlice::new(coarse_separator_parts),
         coarse_dots: SharedSlice::new(&mut s.sums.coarse_dots),
+        member_gas: SharedSlice::new(&mut s.sums.member_gas),
+        member_scale: SharedSlice::new(&mut s.sums.member_scale),
     };
     let force = &s.force;
     let (saved_dv, saved_held) = (SharedSlice::new(&mut s.saved_dv), SharedSlice::new(&mut s.saved_held));
@@ -1726,8 +1774,8 @@ pub(crate) fn substep(
     // (chunks of springs) and `Σ g·v` per chunk of vertices; with `energies` also the chunks'
     // energies of that state (in the chunks and order of `energy::state_energies`: the same
     // bits), each spring chunk's from its terms while they are still in the cache (a pass of its
-    // own read all the balloon's terms again for their extensions). With `origin` (the gas's,
-    // from `prepare_gradient` or `Gas::origins`) it first measures the gas there: gradient in
+    // own read all the balloon's terms again for their extensions). With `measure_gas` it
+    // first measures the gas there: gradient in
     // chunks of vertices and volume in chunks of faces (those of `energy::state_energies`: the
     // same bits) in the same claim as the spring terms, which do not need them, then member 0
     // finishes the volumes, pressures and gas coefficients, and only `Σ g·v` waits for that.
@@ -1738,7 +1786,7 @@ pub(crate) fn substep(
     let separate_dots = s.rows_one_at_a_time;
     #[cfg(not(test))]
     let separate_dots = false;
-    let state_pass = |team: &Team, origin: Option<&[glam::DVec3]>, energies: bool| {
+    let state_pass = |team: &Team, measure_gas: bool, energies: bool| {
         // SAFETY: nobody writes x and v in this pass.
         let (x, v) = unsafe { (xs.whole(), vs.whole()) };
         let spring_input = SpringInput {
@@ -1752,10 +1800,10 @@ pub(crate) fn substep(
         };
         let spring_chunks = model.springs.len().div_ceil(SPRING_CHUNK);
         let vertex_chunks = if energies { n.div_ceil(energy::VERTEX_CHUNK) } else { 0 };
-        let (gradient_chunks, volume_chunks) = if origin.is_some() { (chunks, face_chunks) } else { (0, 0) };
+        let (gradient_chunks, volume_chunks) = if measure_gas { (chunks, face_chunks) } else { (0, 0) };
         let gas_chunks = if fragments > 0 { chunks } else { 0 };
         // `Σ g·v` in the first claim when the gradient is already there.
-        let first_gas_chunks = if origin.is_some() { 0 } else { gas_chunks };
+        let first_gas_chunks = if measure_gas { 0 } else { gas_chunks };
         let (ks, g) = (model.settings.spring_stiffness, model.settings.gravity);
         // (The caller holds a read guard of the gas: a second read lock by the same thread may
         // panic, says std.)
@@ -1775,7 +1823,7 @@ pub(crate) fn substep(
         // Without caps with gas (holes) the gradient chunks are final where they are made, and
         // each takes its `Σ g·v` along (a pass and a barrier fewer); the caps add to the
         // gradient after every chunk is made (`Gas::finish_gradient`).
-        let dots_with_gradient = origin.is_some() && fragments > 0 && !separate_dots && {
+        let dots_with_gradient = measure_gas && fragments > 0 && !separate_dots && {
             let guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
             guard.as_deref().is_some_and(|gas| gas.caps.iter().all(|cap| gas.n_rt[cap.fragment as usize] <= 0.0))
         };
@@ -1803,10 +1851,10 @@ pub(crate) fn substep(
                 }
                 let c = c - spring_chunks;
                 if c < gradient_chunks {
-                    if let (Some(gas), Some(origin)) = (gas, origin) {
+                    if let Some(gas) = gas {
                         // SAFETY: this member's chunk of the gradient.
                         let part = unsafe { gradient.part(rows(c)) };
-                        gas.gradient_rows(x, origin, c * CHUNK, part);
+                        gas.gradient_rows(x, c * CHUNK, part);
                         if dots_with_gradient {
                             // No cap adds to it: the chunk's gradient is final, so its `Σ g·v`
                             // too (`gas_dots` on the chunk's rows).
@@ -1820,10 +1868,10 @@ pub(crate) fn substep(
                 }
                 let c = c - gradient_chunks;
                 if c < volume_chunks {
-                    if let (Some(gas), Some(origin)) = (gas, origin) {
+                    if let Some(gas) = gas {
                         // SAFETY: this member's face chunk of the sums.
                         let six_v = unsafe { gas_six_v.part(c * six_v_parts..(c + 1) * six_v_parts) };
-                        gas.face_chunk_volumes(x, origin, model.triangles, c, six_v);
+                        gas.face_chunk_volumes(x, model.triangles, c, six_v);
                     }
                     return;
                 }
@@ -1840,13 +1888,13 @@ pub(crate) fn substep(
             });
         }
         team.barrier();
-        if let Some(origin) = origin {
+        if measure_gas {
             if team.index() == 0 {
                 let mut guard = gas_lock.write().unwrap_or_else(|e| e.into_inner());
                 if let Some(gas) = guard.as_deref_mut() {
                     // SAFETY: member 0 alone works in this pass.
                     unsafe {
-                        gas.finish_gradient(x, origin, gas_six_v.whole(), gradient.part(0..n));
+                        gas.finish_gradient(x, gas_six_v.whole(), gradient.part(0..n));
                         gas_coefficients(gas, gas_coef.part(0..gas_coef.len()));
                     }
                 }
@@ -1872,7 +1920,7 @@ pub(crate) fn substep(
     let slice_planes = slice_planes.filter(|_| !s.rows_one_at_a_time);
     let (iterations, team_stats) = pool.team_of(members, |team| {
         if !reuse {
-            state_pass(team, gradient_in_team.then_some(&gas_origin[..]), false);
+            state_pass(team, gradient_in_team, false);
         }
         let (iterations, any_contact, end_gas_scale) = {
             let gas_guard = gas_lock.read().unwrap_or_else(|e| e.into_inner());
@@ -1892,15 +1940,16 @@ pub(crate) fn substep(
                 gas_pressure: gas.map_or(&[][..], |g| &g.pressure),
             };
             let gas_rows = |c: usize| c * fragments..(c + 1) * fragments;
-            let mut gas_dot_v = vec![0.0f64; fragments];
+            let own = shared.member_gas(team, fragments);
             // SAFETY: nobody writes the sums or the terms in this pass.
             let (gas_v, terms) = unsafe { (shared.gas_v.whole(), shared.terms.whole()) };
-            sum_gas_partial(gas_v, &mut gas_dot_v);
+            sum_gas_partial(gas_v, own.dot_v);
+            let gas_dot_v = &*own.dot_v;
             #[cfg(target_arch = "x86_64")]
             let planes = slice_planes;
             #[cfg(not(target_arch = "x86_64"))]
             let planes = None;
-            let assembly = AssemblyInput { sys: &sys, terms, force, gas_dot_v: &gas_dot_v, obstacles, planes };
+            let assembly = AssemblyInput { sys: &sys, terms, force, gas_dot_v, obstacles, planes };
             // Assembly: forces, right side, coupling blocks and the block-Jacobi preconditioner (per
             // vertex the springs are stiff along the surface and soft across it, which a diagonal
             // (per axis) preconditioner cannot tell apart on a curved surface; the 3x3 block can),
@@ -1967,10 +2016,10 @@ pub(crate) fn substep(
             let rhs_norm = rhs_squared.sqrt();
             let r0 = (CG_RELATIVE_TOLERANCE * rhs_norm).max(CG_FORCE_TOLERANCE * force_scale);
             if r0 <= 0.0 {
-                let mut gas_dot_dv = vec![0.0f64; fragments];
                 // SAFETY: nobody writes the gas sums (made by the assembly) in this pass.
-                sum_gas_partial(unsafe { shared.gas.whole() }, &mut gas_dot_dv);
-                (0, any_contact, gas_scale(&sys, &gas_dot_dv))
+                sum_gas_partial(unsafe { shared.gas.whole() }, own.dot_dv);
+                gas_scale(&sys, own.dot_dv, own.end_scale);
+                (0, any_contact, &*own.end_scale)
             } else {
                 // The chunks' groups cover them all (whole slices).
                 // SAFETY: written by nobody from here on.
@@ -1998,8 +2047,10 @@ pub(crate) fn substep(
                         max_iterations,
                     }
                 };
-                let (iterations, gas_dot_dv) = shared.solve(team, &input);
-                (iterations, any_contact, gas_scale(&sys, &gas_dot_dv))
+                let mut own = own;
+                let iterations = shared.solve(team, &input, &mut own);
+                gas_scale(&sys, own.dot_dv, own.end_scale);
+                (iterations, any_contact, &*own.end_scale)
             }
         };
         // SAFETY: from here on each member writes only the rows of its own chunks (the contacts
@@ -2231,15 +2282,7 @@ pub(crate) fn substep(
         drop(gas_guard);
         if prepare {
             team.barrier();
-            if gradient_in_team {
-                // SAFETY: from here on nobody writes x (each member takes the origins itself:
-                // a few points, where handing them over took a barrier).
-                let x = unsafe { xs.whole() };
-                let origin = gas_lock.read().unwrap_or_else(|e| e.into_inner()).as_deref().map(|gas| gas.origins(x));
-                state_pass(team, Some(origin.as_deref().unwrap_or_default()), true);
-            } else {
-                state_pass(team, None, true);
-            }
+            state_pass(team, gradient_in_team, true);
         }
         iterations
     });

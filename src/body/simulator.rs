@@ -22,7 +22,7 @@ use super::wind::{DragState, add_wind};
 use super::xpbd::{self, XpbdScratch};
 use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::{Topology, TriMesh, first_degenerate_triangle, require_closed_oriented_solid};
-use crate::parallel::WorkerPool;
+use crate::parallel::{SharedSlice, WorkerPool};
 
 /// What one step did (the Rust side of `SoftshellBodyStats`).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -108,6 +108,8 @@ pub struct Body {
     /// Wind force and positions at the start of a substep (only with wind), for its work.
     wind_force: Vec<Vec3>,
     wind_start: Vec<Vec3>,
+    /// Per vertex, the share of its drag that [`add_wind`] keeps (only with wind).
+    wind_coefficient: Vec<f32>,
     triangles: Vec<[u32; 3]>,
     face_fragment: Vec<u32>,
     fragment_count: usize,
@@ -120,6 +122,12 @@ pub struct Body {
     topology: Option<Topology>,
     obstacles: Vec<Obstacle>,
     scratch: Scratch,
+    /// The buffers of the energy measurement ([`energy::state_energies`]).
+    energy_sums: energy::EnergySums,
+    /// The loads of the `break_force` check ([`Body::loads`]) and the gas gradient they are
+    /// measured with: empty unless the body has a `break_force`.
+    load: Vec<Vec3>,
+    load_gradient: Vec<Vec3>,
     steps: u64,
     time: f64,
     generation: u64,
@@ -168,6 +176,7 @@ macro_rules! model_of {
             springs: &$body.springs,
             mass: &$body.nodes.mass,
             inv_mass: &$body.nodes.inv_mass,
+            wind_force: &$body.wind_force,
         }
     };
 }
@@ -357,6 +366,7 @@ impl Body {
             saved_v: Vec::new(),
             wind_force: Vec::new(),
             wind_start: Vec::new(),
+            wind_coefficient: Vec::new(),
             triangles,
             face_fragment,
             fragment_count,
@@ -366,6 +376,9 @@ impl Body {
             topology: kept_topology,
             obstacles,
             scratch,
+            energy_sums: energy::EnergySums::default(),
+            load: Vec::new(),
+            load_gradient: Vec::new(),
             steps: 0,
             time: 0.0,
             generation: 0,
@@ -596,7 +609,7 @@ impl Body {
             let h = self.settings.time_step / self.settings.substeps.max(1) as f32;
             let state =
                 DragState { x: &self.nodes.x, v: &self.nodes.v, triangles: &self.triangles, mass: &self.nodes.mass, h };
-            add_wind(&state, self.settings.wind, self.settings.drag, &mut f);
+            add_wind(&state, self.settings.wind, self.settings.drag, &mut f, &mut Vec::new());
         }
         std::mem::swap(&mut self.nodes.x, &mut self.saved_x);
         std::mem::swap(&mut self.nodes.v, &mut self.saved_v);
@@ -658,24 +671,24 @@ impl Body {
 
     fn energy_parts_measuring_gas(&mut self, measure_gas: bool) -> EnergyParts {
         let x = &self.nodes.x;
-        let origin = self.gas.as_ref().filter(|_| measure_gas).map(|gas| gas.origins(x));
-        let gas_state =
-            self.gas.as_ref().zip(origin.as_deref()).map(|(gas, origin)| (gas, origin, &self.triangles[..]));
-        let (kinetic, spring, gravity, max_strain, faces) = energy::state_energies(
+        let gas_state = self.gas.as_ref().filter(|_| measure_gas).map(|gas| (gas, &self.triangles[..]));
+        let (kinetic, spring, gravity, max_strain) = energy::state_energies(
             &self.pool,
             &self.springs,
             (x, &self.nodes.v, &self.nodes.mass),
             self.settings.spring_stiffness,
             self.settings.gravity,
             gas_state,
+            &mut self.energy_sums,
         );
-        let gas = match (self.gas.as_mut(), origin) {
-            (Some(gas), Some(origin)) => {
-                gas.finish_face_chunks(x, &origin, &faces);
+        let gas = match self.gas.as_mut() {
+            Some(gas) => {
+                if measure_gas {
+                    gas.finish_face_chunks(x, &self.energy_sums.six_v);
+                }
                 gas.energy()
             }
-            (Some(gas), None) => gas.energy(),
-            _ => 0.0,
+            None => 0.0,
         };
         EnergyParts { kinetic, spring, gravity, gas, max_strain: max_strain as f64 }
     }
@@ -1107,7 +1120,7 @@ impl Body {
             self.wind_force.resize(self.nodes.len(), Vec3::ZERO);
             let state =
                 DragState { x: &self.nodes.x, v: &self.nodes.v, triangles: &self.triangles, mass: &self.nodes.mass, h };
-            add_wind(&state, self.settings.wind, self.settings.drag, &mut self.wind_force);
+            add_wind(&state, self.settings.wind, self.settings.drag, &mut self.wind_force, &mut self.wind_coefficient);
         }
         let (_, iterations) = self.integrate(h, save);
         let work = if self.settings.drag > 0.0 {
@@ -1146,11 +1159,13 @@ impl Body {
             // was about 1% of an implicit step, all of it on one thread.
             const CHUNK: usize = 2048;
             let (obstacles, inv_mass) = (&self.obstacles, &self.nodes.inv_mass);
-            let mut tasks: Vec<(usize, &mut [Vec3], &mut [Vec3])> =
-                x.chunks_mut(CHUNK).zip(v.chunks_mut(CHUNK)).enumerate().map(|(c, (x, v))| (c * CHUNK, x, v)).collect();
-            self.pool.for_each_task(&mut tasks, |(first, x, v)| {
+            let velocities = SharedSlice::new(v);
+            self.pool.for_each_chunk_mut(x, CHUNK, |c, x| {
+                let first = c * CHUNK;
+                // SAFETY: the velocities of this chunk's vertices, used by this chunk alone.
+                let v = unsafe { velocities.part(first..first + x.len()) };
                 for (k, (x, v)) in x.iter_mut().zip(v.iter_mut()).enumerate() {
-                    if inv_mass[*first + k] > 0.0 {
+                    if inv_mass[first + k] > 0.0 {
                         resolve(x, v, obstacles, restitution, friction);
                     }
                 }
@@ -1159,35 +1174,57 @@ impl Body {
         result
     }
 
-    /// The load of every vertex at the end of a step, for `break_force` (SPEC 2.4): the net
-    /// internal force ([`Body::internal_forces`]), but for an XPBD body the forces its
+    /// Tests: [`Body::measure_loads`]' loads.
+    #[cfg(test)]
+    fn loads(&mut self) -> Vec<Vec3> {
+        self.measure_loads();
+        self.load.clone()
+    }
+
+    /// The load of every vertex at the end of a step, for `break_force` (SPEC 2.4), into
+    /// `self.load` (kept between steps: two per-vertex arrays were allocated every step): the
+    /// net internal force ([`Body::internal_forces`]), but for an XPBD body the forces its
     /// constraints applied in the step's last substep ([`xpbd::add_applied_forces`]: its
     /// positions are not those of converged spring and gas laws).
-    fn loads(&mut self) -> Vec<Vec3> {
+    fn measure_loads(&mut self) {
+        let mut f = std::mem::take(&mut self.load);
         if let Scratch::Xpbd(s) = &mut self.scratch {
-            let mut f = vec![Vec3::ZERO; self.nodes.len()];
+            f.clear();
+            f.resize(self.nodes.len(), Vec3::ZERO);
             let model = model_of!(self);
             let h = self.settings.time_step / self.settings.substeps.max(1) as f32;
             if xpbd::add_applied_forces(&model, self.gas.as_mut(), &self.nodes.x, h, s, &mut f) {
-                return f;
+                self.load = f;
+                return;
             }
         }
-        self.internal_forces()
+        let mut gradient = std::mem::take(&mut self.load_gradient);
+        self.internal_forces_into(&mut f, &mut gradient);
+        (self.load, self.load_gradient) = (f, gradient);
     }
 
     /// Net internal force (springs, damping, gas) on every vertex at the current state, by the
     /// spring and gas laws (also for XPBD: the divergence test's bound, [`Body::impulse_bound`],
     /// is the kinetic energy these laws give from rest, whatever an integrator applied).
     fn internal_forces(&mut self) -> Vec<Vec3> {
-        let n = self.nodes.len();
-        let mut f = vec![Vec3::ZERO; n];
-        let model = model_of!(self);
-        add_spring_forces(&model, &self.nodes.x, &self.nodes.v, &mut f);
-        if let Some(gas) = self.gas.as_mut() {
-            let mut gradient = vec![Vec3::ZERO; n];
-            add_gas_forces(&model, gas, &self.nodes.x, &mut gradient, &mut f);
-        }
+        let (mut f, mut gradient) = (Vec::new(), Vec::new());
+        self.internal_forces_into(&mut f, &mut gradient);
         f
+    }
+
+    /// [`Body::internal_forces`] into `f`, with `gradient` for the gas's volume gradient (both
+    /// resized to the vertex count).
+    fn internal_forces_into(&mut self, f: &mut Vec<Vec3>, gradient: &mut Vec<Vec3>) {
+        let n = self.nodes.len();
+        f.clear();
+        f.resize(n, Vec3::ZERO);
+        let model = model_of!(self);
+        add_spring_forces(&model, &self.nodes.x, &self.nodes.v, f);
+        if let Some(gas) = self.gas.as_mut() {
+            gradient.clear();
+            gradient.resize(n, Vec3::ZERO);
+            add_gas_forces(&model, gas, &self.nodes.x, gradient, f);
+        }
     }
 
     /// SPEC 2.4 fracture check (springs, then cores) at the end of the step; returns
@@ -1239,9 +1276,10 @@ impl Body {
         let mut cores = Vec::new();
         if self.settings.break_force > 0.0 {
             let limit = self.settings.break_force;
-            let f = self.loads();
+            self.measure_loads();
             let fracture = self.fracture.as_ref();
-            cores = f
+            cores = self
+                .load
                 .iter()
                 .enumerate()
                 .filter(|(i, f)| f.length() > limit && !fracture.is_some_and(|fr| fr.is_in_core(*i)))
@@ -1538,6 +1576,7 @@ impl Body {
                 + self.wind_force.capacity()
                 + self.wind_start.capacity())
                 * 12
+            + self.wind_coefficient.capacity() * 4
             + self.triangles.capacity() * 12
             + self.face_fragment.capacity() * 4
             + self.springs.memory_bytes()
@@ -1546,6 +1585,8 @@ impl Body {
             + self.topology.as_ref().map_or(0, Topology::memory_bytes)
             + self.obstacles.capacity() * std::mem::size_of::<Obstacle>()
             + self.scratch.memory_bytes()
+            + self.energy_sums.memory_bytes()
+            + (self.load.capacity() + self.load_gradient.capacity()) * 12
             + self.pool.memory_bytes()
     }
 

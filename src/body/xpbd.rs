@@ -26,6 +26,9 @@ pub(crate) struct XpbdScratch {
     lambda: Vec<f32>,
     gas_lambda: Vec<f64>,
     gas_norm: Vec<f64>,
+    /// Per fragment: this iteration's change of `gas_lambda` (kept to be reused, not made per
+    /// iteration).
+    gas_delta: Vec<f64>,
     /// Contact normal of each vertex in this substep (only with obstacles), with the normal
     /// speed it had before the solve.
     contact: Vec<Option<(Vec3, f32)>>,
@@ -42,7 +45,7 @@ impl XpbdScratch {
     pub fn memory_bytes(&self) -> usize {
         (self.force.capacity() + self.gradient.capacity() + self.displacement.capacity()) * 12
             + self.lambda.capacity() * 4
-            + (self.gas_lambda.capacity() + self.gas_norm.capacity()) * 8
+            + (self.gas_lambda.capacity() + self.gas_norm.capacity() + self.gas_delta.capacity()) * 8
             + self.contact.capacity() * std::mem::size_of::<Option<(Vec3, f32)>>()
     }
 }
@@ -137,7 +140,7 @@ pub(crate) fn substep(
 ) -> f64 {
     let n = x.len();
     s.force.resize(n, Vec3::ZERO);
-    let power = external_forces(model, x, v, &mut s.force);
+    let power = external_forces(model, v, &mut s.force);
     s.displacement.clear();
     s.displacement.resize(n, Vec3::ZERO);
     for i in 0..n {
@@ -158,6 +161,7 @@ pub(crate) fn substep(
         s.gas_lambda.clear();
         s.gas_lambda.resize(gas.fragment_count(), 0.0);
         s.gas_norm.resize(gas.fragment_count(), 0.0);
+        s.gas_delta.resize(gas.fragment_count(), 0.0);
     }
     let (stiffness_h2, damping_h) = (ks * h * h, kd * h);
     for _ in 0..iterations.max(1) {
@@ -170,24 +174,26 @@ pub(crate) fn substep(
                     s.gas_norm[f as usize] += (model.inv_mass[i] * g.length_squared()) as f64;
                 }
             }
-            let deltas: Vec<f64> = (0..gas.fragment_count())
-                .map(|f| {
+            for (f, delta) in s.gas_delta.iter_mut().enumerate() {
+                *delta = {
                     if gas.n_rt[f] <= 0.0 {
-                        return 0.0;
+                        0.0
+                    } else {
+                        let vol = gas.volume[f].max(gas.v_min[f]).max(f64::MIN_POSITIVE);
+                        let target = h2 * gas.n_rt[f] / vol;
+                        let slope = if gas.volume[f] > gas.v_min[f] { h2 * gas.n_rt[f] / (vol * vol) } else { 0.0 };
+                        let delta = -(s.gas_lambda[f] - target) / (1.0 + slope * s.gas_norm[f]);
+                        // Trust region: one update changes the volume by at most a tenth (the
+                        // linearisation is only good that far; shreds near zero volume need it).
+                        let limit = 0.1 * vol / s.gas_norm[f].max(f64::MIN_POSITIVE);
+                        delta.clamp(-limit, limit)
                     }
-                    let vol = gas.volume[f].max(gas.v_min[f]).max(f64::MIN_POSITIVE);
-                    let target = h2 * gas.n_rt[f] / vol;
-                    let slope = if gas.volume[f] > gas.v_min[f] { h2 * gas.n_rt[f] / (vol * vol) } else { 0.0 };
-                    let delta = -(s.gas_lambda[f] - target) / (1.0 + slope * s.gas_norm[f]);
-                    // Trust region: one update changes the volume by at most a tenth (the
-                    // linearisation is only good that far; shreds near zero volume need it).
-                    let limit = 0.1 * vol / s.gas_norm[f].max(f64::MIN_POSITIVE);
-                    delta.clamp(-limit, limit)
-                })
-                .collect();
-            for (f, d) in deltas.iter().enumerate() {
-                s.gas_lambda[f] += d;
+                };
             }
+            for (lambda, d) in s.gas_lambda.iter_mut().zip(&s.gas_delta) {
+                *lambda += d;
+            }
+            let deltas = &s.gas_delta;
             for (i, g) in s.gradient.iter().enumerate() {
                 let f = gas.vertex_fragment[i];
                 if f != u32::MAX {

@@ -580,12 +580,24 @@ impl Bvh {
 
     /// Calls `f(i, j)` for every primitive `i` of `self` and `j` of `other` whose boxes overlap
     /// (and share no key, when both trees have keys).
-    pub fn for_each_overlap(&self, other: &Bvh, mut f: impl FnMut(u32, u32)) {
+    pub fn for_each_overlap(&self, other: &Bvh, f: impl FnMut(u32, u32)) {
+        self.for_each_overlap_with(other, &mut Vec::new(), f);
+    }
+
+    /// [`Bvh::for_each_overlap`] with the caller's traversal stack (kept between calls: a new
+    /// one was an allocation per refill of a shell's contact cache).
+    pub(crate) fn for_each_overlap_with(
+        &self,
+        other: &Bvh,
+        stack: &mut Vec<(u32, u32, bool)>,
+        mut f: impl FnMut(u32, u32),
+    ) {
         if self.nodes.is_empty() || other.nodes.is_empty() {
             return;
         }
-        let mut stack = vec![(0u32, 0u32)];
-        while let Some((x, y)) = stack.pop() {
+        stack.clear();
+        stack.push((0, 0, false));
+        while let Some((x, y, _)) = stack.pop() {
             let (nx, ny) = (&self.nodes[x as usize], &other.nodes[y as usize]);
             if !nx.aabb.overlaps(&ny.aabb) {
                 continue;
@@ -593,13 +605,13 @@ impl Bvh {
             match (nx.is_leaf(), ny.is_leaf()) {
                 (true, true) => self.leaf_pairs(nx, other, ny, false, |k, l| f(self.order[k], other.order[l])),
                 // Descend into the larger internal node (or the only internal one).
-                (false, true) => stack.extend([(nx.a, y), (nx.b, y)]),
-                (true, false) => stack.extend([(x, ny.a), (x, ny.b)]),
+                (false, true) => stack.extend([(nx.a, y, false), (nx.b, y, false)]),
+                (true, false) => stack.extend([(x, ny.a, false), (x, ny.b, false)]),
                 (false, false) => {
                     if nx.half_area >= ny.half_area {
-                        stack.extend([(nx.a, y), (nx.b, y)]);
+                        stack.extend([(nx.a, y, false), (nx.b, y, false)]);
                     } else {
-                        stack.extend([(x, ny.a), (x, ny.b)]);
+                        stack.extend([(x, ny.a, false), (x, ny.b, false)]);
                     }
                 }
             }
@@ -608,12 +620,18 @@ impl Bvh {
 
     /// Calls `f(i, j)` with `i < j` once for every pair of primitives whose boxes overlap (and
     /// share no key, when the tree has keys).
-    pub fn for_each_self_overlap(&self, mut f: impl FnMut(u32, u32)) {
+    pub fn for_each_self_overlap(&self, f: impl FnMut(u32, u32)) {
+        self.for_each_self_overlap_with(&mut Vec::new(), f);
+    }
+
+    /// [`Bvh::for_each_self_overlap`] with the caller's traversal stack.
+    pub(crate) fn for_each_self_overlap_with(&self, stack: &mut Vec<(u32, u32, bool)>, mut f: impl FnMut(u32, u32)) {
         if self.nodes.is_empty() {
             return;
         }
         // (x, y, same): pairs within node x when `same`, else between nodes x and y.
-        let mut stack = vec![(0u32, 0u32, true)];
+        stack.clear();
+        stack.push((0, 0, true));
         while let Some((x, y, same)) = stack.pop() {
             let nx = &self.nodes[x as usize];
             if same {

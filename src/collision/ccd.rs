@@ -4,7 +4,7 @@
 
 use super::filters::{V3, plane_distance_filter, sub, swept_aabbs_separated};
 use super::hull_filter::separated_piecewise;
-use super::inclusion;
+use super::inclusion::{self, SearchQueues};
 use super::self_contact::{closest_on_triangle, closest_segments};
 use glam::DVec3;
 
@@ -306,6 +306,17 @@ pub fn vertex_triangle(start: &[V3; 4], end: &[V3; 4], thickness: f64) -> Option
 
 /// [`vertex_triangle`] with explicit settings, reporting the deciding stage.
 pub fn vertex_triangle_with(start: &[V3; 4], end: &[V3; 4], thickness: f64, settings: &CcdSettings) -> CcdOutcome {
+    vertex_triangle_in(start, end, thickness, settings, &mut SearchQueues::default())
+}
+
+/// [`vertex_triangle_with`] with the caller's search queues (kept between queries).
+pub(crate) fn vertex_triangle_in(
+    start: &[V3; 4],
+    end: &[V3; 4],
+    thickness: f64,
+    settings: &CcdSettings,
+    queues: &mut SearchQueues,
+) -> CcdOutcome {
     let thickness = if thickness < 0.0 { 0.0 } else { thickness }; // NaN stays NaN: out of range
     if out_of_range(start, end, thickness) {
         return CcdOutcome { toi: Some(0.0), stage: Stage::OutOfRange, boxes: 0 };
@@ -332,7 +343,14 @@ pub fn vertex_triangle_with(start: &[V3; 4], end: &[V3; 4], thickness: f64, sett
             return stage;
         }
     }
-    from_search(inclusion::vertex_triangle(start, end, thickness, settings.relative_tolerance, settings.max_boxes))
+    from_search(inclusion::vertex_triangle(
+        start,
+        end,
+        thickness,
+        settings.relative_tolerance,
+        settings.max_boxes,
+        queues,
+    ))
 }
 
 /// Edge `ab` against edge `cd`, each moving linearly from `start = [a, b, c, d]` at t = 0 to
@@ -344,6 +362,17 @@ pub fn edge_edge(start: &[V3; 4], end: &[V3; 4], thickness: f64) -> Option<f64> 
 
 /// [`edge_edge`] with explicit settings, reporting the deciding stage.
 pub fn edge_edge_with(start: &[V3; 4], end: &[V3; 4], thickness: f64, settings: &CcdSettings) -> CcdOutcome {
+    edge_edge_in(start, end, thickness, settings, &mut SearchQueues::default())
+}
+
+/// [`edge_edge_with`] with the caller's search queues (kept between queries).
+pub(crate) fn edge_edge_in(
+    start: &[V3; 4],
+    end: &[V3; 4],
+    thickness: f64,
+    settings: &CcdSettings,
+    queues: &mut SearchQueues,
+) -> CcdOutcome {
     let thickness = if thickness < 0.0 { 0.0 } else { thickness }; // NaN stays NaN: out of range
     if out_of_range(start, end, thickness) {
         return CcdOutcome { toi: Some(0.0), stage: Stage::OutOfRange, boxes: 0 };
@@ -370,7 +399,7 @@ pub fn edge_edge_with(start: &[V3; 4], end: &[V3; 4], thickness: f64, settings: 
             return stage;
         }
     }
-    from_search(inclusion::edge_edge(start, end, thickness, settings.relative_tolerance, settings.max_boxes))
+    from_search(inclusion::edge_edge(start, end, thickness, settings.relative_tolerance, settings.max_boxes, queues))
 }
 
 #[cfg(test)]

@@ -61,6 +61,27 @@ trait Domain: Copy {
     fn t_lo(&self) -> f64;
 }
 
+/// The search queues of the two kinds of query, kept by their owner between queries (a shell's
+/// collision stage makes many per step: a fresh queue allocated its heap, slab and free list on
+/// every query that split a domain). A queue that grew past [`KEPT_QUEUE_ENTRIES`] gives the
+/// rest of its memory back after its query.
+#[derive(Clone, Debug, Default)]
+pub struct SearchQueues {
+    vertex_triangle: Queue<VfDomain>,
+    edge_edge: Queue<EeDomain>,
+}
+
+impl SearchQueues {
+    /// Heap bytes held.
+    pub fn memory_bytes(&self) -> usize {
+        self.vertex_triangle.memory_bytes() + self.edge_edge.memory_bytes()
+    }
+}
+
+/// The most entries a queue keeps allocated between queries: with both kinds of domain at most
+/// about 40 KB (a query that splits at all queues a few dozen).
+const KEPT_QUEUE_ENTRIES: usize = 256;
+
 /// Number of time buckets of the queue: 2^20 (a bucket is about 1e-6 of the step).
 const TIME_BUCKETS: f64 = (1u64 << 20) as f64;
 const SLOT_BITS: u32 = 27;
@@ -87,10 +108,35 @@ fn bucket_of(t_lo: f64) -> u64 {
 
 /// The queue: keys in a binary heap, domains in a slab reused through a free list (moving 8-byte
 /// keys instead of whole domains).
+#[derive(Clone, Debug)]
 struct Queue<B> {
     heap: std::collections::BinaryHeap<u64>,
     slab: Vec<B>,
     free: Vec<u32>,
+}
+
+impl<B> Default for Queue<B> {
+    fn default() -> Self {
+        Self { heap: std::collections::BinaryHeap::new(), slab: Vec::new(), free: Vec::new() }
+    }
+}
+
+impl<B> Queue<B> {
+    fn clear(&mut self) {
+        self.heap.clear();
+        self.slab.clear();
+        self.free.clear();
+    }
+
+    fn shrink_to(&mut self, entries: usize) {
+        self.heap.shrink_to(entries);
+        self.slab.shrink_to(entries);
+        self.free.shrink_to(entries);
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.heap.capacity() * 8 + self.slab.capacity() * std::mem::size_of::<B>() + self.free.capacity() * 4
+    }
 }
 
 impl<B: Domain> Queue<B> {
@@ -127,9 +173,21 @@ impl<B: Domain> Queue<B> {
 /// Domains are taken in bucket order, so the answer is at most one bucket (2^-20) earlier than
 /// the leaf's start. A child in the bucket of its parent would be taken next anyway (it is the
 /// deepest), so it is examined at once without a trip through the queue.
-fn earliest<B: Domain>(root: B, max_boxes: u32, mut examine: impl FnMut(&B) -> Verdict<B>) -> Search {
+fn earliest<B: Domain>(queue: &mut Queue<B>, root: B, max_boxes: u32, examine: impl FnMut(&B) -> Verdict<B>) -> Search {
+    queue.clear();
+    let found = search(queue, root, max_boxes, examine);
+    queue.clear();
+    queue.shrink_to(KEPT_QUEUE_ENTRIES);
+    found
+}
+
+fn search<B: Domain>(
+    queue: &mut Queue<B>,
+    root: B,
+    max_boxes: u32,
+    mut examine: impl FnMut(&B) -> Verdict<B>,
+) -> Search {
     let max_boxes = max_boxes.min(MAX_BOXES_LIMIT);
-    let mut queue = Queue { heap: std::collections::BinaryHeap::new(), slab: Vec::new(), free: Vec::new() };
     let mut next = Some((root, 0u16));
     let mut boxes = 0u32;
     while let Some((domain, depth)) = next.take().or_else(|| queue.pop()) {
@@ -151,9 +209,9 @@ fn earliest<B: Domain>(root: B, max_boxes: u32, mut examine: impl FnMut(&B) -> V
             Verdict::Leaf => return Search { toi: Some(queue.open_min(t_lo)), boxes, exhausted: false },
             Verdict::Split(first, second) => {
                 queue.push(second, depth + 1);
-                follow(first, &mut queue);
+                follow(first, queue);
             }
-            Verdict::Only(part) => follow(part, &mut queue),
+            Verdict::Only(part) => follow(part, queue),
         }
     }
     Search { toi: None, boxes, exhausted: false }
@@ -266,7 +324,7 @@ fn deltas(start: &[V3; 4], end: &[V3; 4]) -> [V3; 4] {
 
 /// A time interval times a triangle of barycentric parameters (u, v): the point of the triangle
 /// is `a + u (b - a) + v (c - a)`.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 struct VfDomain {
     t: [f64; 2],
     q: [[f64; 2]; 3],
@@ -316,6 +374,7 @@ pub fn vertex_triangle(
     thickness: f64,
     relative_tolerance: f64,
     max_boxes: u32,
+    queues: &mut SearchQueues,
 ) -> Search {
     let bounds = Bounds::new(start, end, thickness, relative_tolerance);
     let delta = deltas(start, end);
@@ -331,7 +390,7 @@ pub fn vertex_triangle(
         })
     };
     let root = VfDomain { t: [0.0, 1.0], q: [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], t_splits: 0, q_splits: 0 };
-    earliest(root, max_boxes, |d| {
+    earliest(&mut queues.vertex_triangle, root, max_boxes, |d| {
         let s0 = slice(d.t[0], &d.q);
         let s1 = slice(d.t[1], &d.q);
         let corners = [s0[0], s0[1], s0[2], s1[0], s1[1], s1[2]];
@@ -378,7 +437,7 @@ pub fn vertex_triangle(
 }
 
 /// A box of time and the two edge parameters: points `a + u (b - a)` and `c + v (d - c)`.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 struct EeDomain {
     /// t, u, v intervals.
     range: [[f64; 2]; 3],
@@ -408,7 +467,14 @@ impl EeDomain {
 /// Earliest time at which edge `ab` can be within `thickness` of edge `cd` (max-norm, so
 /// conservative for the Euclidean distance). `start = [a, b, c, d]` at t = 0, `end` at t = 1.
 /// Coordinates must be finite and at most 2^1000 in magnitude (checked by the caller).
-pub fn edge_edge(start: &[V3; 4], end: &[V3; 4], thickness: f64, relative_tolerance: f64, max_boxes: u32) -> Search {
+pub fn edge_edge(
+    start: &[V3; 4],
+    end: &[V3; 4],
+    thickness: f64,
+    relative_tolerance: f64,
+    max_boxes: u32,
+    queues: &mut SearchQueues,
+) -> Search {
     let bounds = Bounds::new(start, end, thickness, relative_tolerance);
     let delta = deltas(start, end);
     // Gap values at time t at the four corners (u, v) of the box, index 2 i + k.
@@ -422,7 +488,7 @@ pub fn edge_edge(start: &[V3; 4], end: &[V3; 4], thickness: f64, relative_tolera
         })
     };
     let root = EeDomain { range: [[0.0, 1.0]; 3], splits: [0; 3] };
-    earliest(root, max_boxes, |d| {
+    earliest(&mut queues.edge_edge, root, max_boxes, |d| {
         let [t, u, v] = d.range;
         let s0 = slice(t[0], u, v);
         let s1 = slice(t[1], u, v);

@@ -23,11 +23,12 @@
 use glam::{DVec3, Vec3, Vec3A};
 
 use super::bvh::{Box32, Bvh};
-use super::ccd::{CcdSettings, Stage, edge_edge_with, vertex_triangle_with};
+use super::ccd::{CcdSettings, Stage, edge_edge_in, vertex_triangle_in};
 use super::filters::V3;
 use super::hull_filter::{
     diagonal_margin, diagonals_separated, edge_edge_hulls_separated, vertex_triangle_hulls_separated,
 };
+use super::inclusion::SearchQueues;
 use crate::mesh::vertex_incidence;
 
 /// Projection rounds (projection, then re-check of the moved pairs) before the fail-safe.
@@ -123,6 +124,12 @@ pub struct SelfContact {
     escaped: Vec<u32>,
     /// Scratch of the BVH queries of a partial refill.
     query_stack: Vec<u32>,
+    /// The CCD's search queues (kept between queries).
+    search: SearchQueues,
+    /// Scratch of the tree-against-tree traversals of a full refill.
+    pair_stack: Vec<(u32, u32, bool)>,
+    /// Scratch of a partial refill: the vertices, edges and faces it changed.
+    changed: [Vec<u32>; 3],
     /// The edges and the faces of each vertex (CSR: those of v are at `[start[v], start[v+1])`),
     /// so that a partial refill finds the primitives of the escaped vertices without a pass
     /// over the mesh.
@@ -355,6 +362,9 @@ impl SelfContact {
             pairs_thickness: f64::NAN,
             escaped: Vec::with_capacity(x.len()),
             query_stack: Vec::with_capacity(64),
+            pair_stack: Vec::with_capacity(64),
+            search: SearchQueues::default(),
+            changed: Default::default(),
             before: x.to_vec(),
             vertex_edges: vertex_incidence(x.len(), edges, |e, _| e as u32),
             vertex_faces: vertex_incidence(x.len(), triangles, |f, _| f as u32),
@@ -396,6 +406,9 @@ impl SelfContact {
             + b(&self.ee_pairs)
             + b(&self.escaped)
             + b(&self.query_stack)
+            + b(&self.pair_stack)
+            + self.search.memory_bytes()
+            + self.changed.iter().map(b).sum::<usize>()
             + b(&self.before)
             + b(&self.vertex_edges.0)
             + b(&self.vertex_edges.1)
@@ -465,12 +478,13 @@ impl SelfContact {
         let (vf, ee) = (&mut self.vf_pairs, &mut self.ee_pairs);
         vf.clear();
         ee.clear();
-        self.vertex_tree.for_each_overlap(&self.face_tree, |v, f| {
+        let stack = &mut self.pair_stack;
+        self.vertex_tree.for_each_overlap_with(&self.face_tree, stack, |v, f| {
             if !tris[f as usize].contains(&v) {
                 vf.push((v, f));
             }
         });
-        self.edge_tree.for_each_self_overlap(|i, j| {
+        self.edge_tree.for_each_self_overlap_with(stack, |i, j| {
             let ([a, b], [c, e]) = (edges[i as usize], edges[j as usize]);
             if a != c && a != e && b != c && b != e {
                 ee.push((i, j));
@@ -500,7 +514,10 @@ impl SelfContact {
         let union = |prim: &[u32]| {
             grown_outward(&prim.iter().fold(Box32::EMPTY, |acc, &v| acc.union(&reach[v as usize])), half)
         };
-        let (mut mv, mut me, mut mf) = (Vec::new(), Vec::new(), Vec::new());
+        let [mut mv, mut me, mut mf] = std::mem::take(&mut self.changed);
+        for changed in [&mut mv, &mut me, &mut mf] {
+            changed.clear();
+        }
         for &v in &self.escaped {
             self.vertex_boxes[v as usize] = union(&[v]);
             mv.push(v);
@@ -569,6 +586,7 @@ impl SelfContact {
         for &f in &mf {
             self.dirty_face[f as usize] = false;
         }
+        self.changed = [mv, me, mf];
     }
 
     /// [`SelfContact::ensure_pairs`], counting cache refills; returns the tree rebuilds.
@@ -657,6 +675,7 @@ impl SelfContact {
         let (mv, me, mf) = (&self.dirty_vertex, &self.dirty_edge, &self.dirty_face);
         let (tris, edges, flags, settings) = (&self.triangles, &self.edges, &self.flags, &self.settings);
         let hits = &mut self.hits;
+        let search = &mut self.search;
         let first = !only_moved;
         // Stage None: refuted by the hull filter.
         let mut tally = |stage: Option<Stage>| {
@@ -697,7 +716,7 @@ impl SelfContact {
                     tally(None);
                     return;
                 }
-                let out = vertex_triangle_with(&start, &end, thickness, settings);
+                let out = vertex_triangle_in(&start, &end, thickness, settings, search);
                 tally(Some(out.stage));
                 if let Some(toi) = out.toi {
                     hits.push((0, v, f, toi));
@@ -719,7 +738,7 @@ impl SelfContact {
                     tally(None);
                     return;
                 }
-                let out = edge_edge_with(&start, &end, thickness, settings);
+                let out = edge_edge_in(&start, &end, thickness, settings, search);
                 tally(Some(out.stage));
                 if let Some(toi) = out.toi {
                     hits.push((1, i, j, toi));

@@ -733,7 +733,9 @@ pub unsafe extern "C" fn softshell_body_fragment_count(body: *const SoftshellBod
 /// start, with room for an eighth more vertices, edges and faces, so that the topology update
 /// of a step that cracks within that room allocates no large array; the springs, the gas and
 /// the solver's per-vertex buffers are still rebuilt or grown after a crack, so the figure can
-/// rise then. 0 for NULL.
+/// rise then. A step that changes no topology allocates nothing once the body has taken its
+/// first steps (its scratch is sized by them); on several threads the implicit integrator's
+/// solve still asks the thread pool for one small job record per substep. 0 for NULL.
 ///
 /// # Safety
 /// `body` must be NULL or a live body.

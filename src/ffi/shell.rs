@@ -718,10 +718,12 @@ pub unsafe extern "C" fn softshell_shell_copy_vertex_curvature(
 }
 
 /// Bytes held by the shell: its handle, rest data, state and scratch (the worker threads and the
-/// thread pool's own bookkeeping, inside rayon, excluded; the collision BVHs' size is estimated).
+/// thread pool's own bookkeeping, inside rayon, excluded).
 /// Only what the scene uses is allocated: no bending data with `SOFTSHELL_BENDING_NONE`, no
 /// anisotropy data before a region is added, no multipliers with the PBD solver, no pool with
-/// `threads = 1`. 0 for NULL.
+/// `threads = 1`. A step allocates nothing without collisions; with them it only grows the
+/// contact buffers (cached pairs, contacts, CCD search queues) to the largest contact set so
+/// far, so this figure can rise while the shell contracts. 0 for NULL.
 ///
 /// # Safety
 /// `shell` must be NULL or a live shell.

@@ -10,8 +10,8 @@ use super::damping::{DAMPING_FIT_CHANNELS, DAMPING_MOMENT_CHANNELS};
 use super::layout::LatticeLayout;
 use super::matching::{FIT_CHANNELS, IDENTITY_COLUMNS, MOMENT_CHANNELS, RegionRest, RotationColumns};
 use super::params::LatticeParams;
-use super::step::{POSITION_LIMIT, ring_rows};
-use super::summation::box_sum;
+use super::step::{BlockStats, FitScratch, POSITION_LIMIT, ring_rows};
+use super::summation::{box_sum, row_block};
 use crate::error::{Error, Result};
 use crate::parallel::WorkerPool;
 
@@ -46,8 +46,11 @@ pub struct Lattice {
     pub(super) rotation_next: Vec<RotationColumns>,
     pub(super) pinned: Option<Vec<bool>>,
     pub(super) force: Option<Vec<[f64; 3]>>,
-    /// Scratch: per worker thread, a ring of `2w + 2` rows of particle moments summed along x.
-    pub(super) rings: Vec<Vec<f64>>,
+    /// Scratch: per worker thread, the fit pass's rows ([`FitScratch`]: a ring of `2w + 2` rows
+    /// of particle moments summed along x, ...).
+    pub(super) fit_scratch: Vec<FitScratch>,
+    /// Scratch: per block of rows, its share of the update pass's statistics.
+    pub(super) block_stats: Vec<BlockStats>,
     /// Scratch: what each region hands back to its particles, summed along x.
     pub(super) spread: Vec<f64>,
     pub(super) steps: u64,
@@ -116,7 +119,16 @@ impl Lattice {
             rotation_next: vec![IDENTITY_COLUMNS; n],
             pinned: None,
             force: None,
-            rings: (0..pool.threads()).map(|_| vec![0.0; ring_rows(w, rows) * columns * moment_channels]).collect(),
+            // Sized here, so that a step allocates nothing.
+            fit_scratch: (0..pool.threads())
+                .map(|_| FitScratch {
+                    ring: vec![0.0; ring_rows(w, rows) * columns * moment_channels],
+                    fits: vec![0.0; columns * fit_channels],
+                    q: vec![0.0; columns * moment_channels],
+                    acc: vec![0.0; columns * moment_channels],
+                })
+                .collect(),
+            block_stats: vec![BlockStats::with_window(columns * fit_channels); rows.div_ceil(row_block(w, rows))],
             spread: vec![0.0; n * fit_channels],
             steps: 0,
             time: 0.0,
@@ -255,8 +267,11 @@ impl Lattice {
             + (self.rotation.capacity() + self.rotation_next.capacity()) * size_of::<RotationColumns>()
             + self.pinned.as_ref().map_or(0, |p| p.capacity())
             + self.force.as_ref().map_or(0, |f| f.capacity() * v3)
-            + (self.rings.iter().map(Vec::capacity).sum::<usize>() + self.spread.capacity()) * size_of::<f64>()
-            + self.rings.capacity() * size_of::<Vec<f64>>()
+            + self.fit_scratch.iter().map(FitScratch::memory_bytes).sum::<usize>()
+            + self.spread.capacity() * size_of::<f64>()
+            + self.fit_scratch.capacity() * size_of::<FitScratch>()
+            + self.block_stats.iter().map(BlockStats::memory_bytes).sum::<usize>()
+            + (self.block_stats.capacity() - self.block_stats.len()) * size_of::<BlockStats>()
             + self.pool.memory_bytes()
     }
 }

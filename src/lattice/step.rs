@@ -30,7 +30,7 @@ use super::params::LatticeParams;
 use super::simulator::{Lattice, StepStats};
 use super::summation::{RowWindow, add_row, row_block, running_sum_row, shift_rows};
 use crate::error::{Error, ErrorKind, Result};
-use crate::parallel::WorkerPool;
+use crate::parallel::{SharedSlice, WorkerPool};
 
 /// Positions beyond this (m) count as diverged: far past anything physical, and still far
 /// inside f32 range, so what a caller copies out is always finite (and a goal distance, at most
@@ -110,7 +110,7 @@ impl<'a> Passes<'a> {
         x: &[[f64; 3]],
         v: &[[f64; 3]],
         rotation: &[RotationColumns],
-        rings: &mut [Vec<f64>],
+        scratch: &mut [FitScratch],
         spread: &mut [f64],
         rotation_out: &mut [RotationColumns],
     ) {
@@ -120,31 +120,33 @@ impl<'a> Passes<'a> {
         let spacing_sq = self.layout.spacing() * self.layout.spacing();
         let cap = ring_rows(w, rows);
         let block_rows = row_block(w, rows);
-        let mut blocks: Vec<FitBlock> = spread
-            .chunks_mut(block_rows * columns * fc)
-            .zip(rotation_out.chunks_mut(block_rows * columns))
-            .enumerate()
-            .map(|(i, (f, r))| (i, f, r))
-            .collect();
+        let blocks = rows.div_ceil(block_rows);
+        assert!(spread.len() >= rows * columns * fc && rotation_out.len() >= rows * columns);
+        let (spread_all, rotation_all) = (SharedSlice::new(spread), SharedSlice::new(rotation_out));
         // One ring per group of consecutive blocks, one group per worker. A block rebuilds its
         // ring from scratch, so which group it is in changes nothing in the result.
-        let per_group = blocks.len().div_ceil(rings.len().max(1));
-        let mut groups: Vec<(&mut [FitBlock], &mut Vec<f64>)> =
-            blocks.chunks_mut(per_group).zip(rings.iter_mut()).collect();
-        pool.for_each_chunk_mut(&mut groups, 1, |_, group| {
-            let (block, ring) = &mut group[0];
-            let mut fits = vec![0.0; columns * fc];
-            let mut q = vec![0.0; stride];
-            let mut acc = vec![0.0; stride];
-            for (index, spread, rotation_out) in block.iter_mut() {
-                let k0 = *index * block_rows;
+        let per_group = blocks.div_ceil(scratch.len().max(1));
+        pool.for_each_chunk_mut(scratch, 1, |group, scratch| {
+            let FitScratch { ring, fits, q, acc } = &mut scratch[0];
+            fits.resize(columns * fc, 0.0);
+            q.resize(stride, 0.0);
+            acc.resize(stride, 0.0);
+            for index in group * per_group..((group + 1) * per_group).min(blocks) {
+                let k0 = index * block_rows;
                 let k1 = (k0 + block_rows).min(rows);
+                // SAFETY: the rows of block `index`, written by this group alone.
+                let (spread, rotation_out) = unsafe {
+                    (
+                        spread_all.part(k0 * columns * fc..k1 * columns * fc),
+                        rotation_all.part(k0 * columns..k1 * columns),
+                    )
+                };
                 ring.resize(cap * stride, 0.0);
                 let slot = |j: usize| (j % cap) * stride..(j % cap + 1) * stride;
                 acc.fill(0.0);
                 for j in k0.saturating_sub(w)..=(k0 + w).min(rows - 1) {
-                    self.moment_row(j, x, v, &mut q, &mut ring[slot(j)]);
-                    add_row(&mut acc, &ring[slot(j)]);
+                    self.moment_row(j, x, v, q, &mut ring[slot(j)]);
+                    add_row(acc, &ring[slot(j)]);
                 }
                 for k in k0..k1 {
                     for c in 0..columns {
@@ -172,21 +174,17 @@ impl<'a> Passes<'a> {
                         }
                     }
                     let local_row = (k - k0) * columns * fc;
-                    running_sum_row(&fits, &mut spread[local_row..local_row + columns * fc], fc, w);
+                    running_sum_row(fits, &mut spread[local_row..local_row + columns * fc], fc, w);
                     if k + 1 == k1 {
                         break;
                     }
                     // The z running sum: B(k+1) = B(k) + row(k+w+1) - row(k-w).
                     let entering = k + w + 1 < rows;
                     if entering {
-                        self.moment_row(k + w + 1, x, v, &mut q, &mut ring[slot(k + w + 1)]);
+                        self.moment_row(k + w + 1, x, v, q, &mut ring[slot(k + w + 1)]);
                     }
                     let ring = &ring[..];
-                    shift_rows(
-                        &mut acc,
-                        entering.then(|| &ring[slot(k + w + 1)]),
-                        (k >= w).then(|| &ring[slot(k - w)]),
-                    );
+                    shift_rows(acc, entering.then(|| &ring[slot(k + w + 1)]), (k >= w).then(|| &ring[slot(k - w)]));
                 }
             }
         });
@@ -199,18 +197,48 @@ pub(super) fn ring_rows(w: usize, rows: usize) -> usize {
     (2 * w + 2).min(rows)
 }
 
-/// One block of rows of the fit pass: its index, its rows of x-summed fits, its rotations.
-type FitBlock<'a> = (usize, &'a mut [f64], &'a mut [RotationColumns]);
+/// A worker's scratch of the fit pass, kept between steps (made per step, they were
+/// allocations every step): the ring of `2w + 2` rows of particle moments summed along x, one
+/// row of fits, and a row's particle moments and their running z sums.
+#[derive(Clone, Debug, Default)]
+pub(super) struct FitScratch {
+    pub ring: Vec<f64>,
+    pub fits: Vec<f64>,
+    pub q: Vec<f64>,
+    pub acc: Vec<f64>,
+}
 
-/// One block of rows of the update pass, with its share of the statistics.
-struct UpdateBlock<'a> {
-    index: usize,
-    x: &'a mut [[f64; 3]],
-    v: &'a mut [[f64; 3]],
+impl FitScratch {
+    pub fn memory_bytes(&self) -> usize {
+        (self.ring.capacity() + self.fits.capacity() + self.q.capacity() + self.acc.capacity())
+            * std::mem::size_of::<f64>()
+    }
+}
+
+/// A block of rows' share of the update pass's statistics, and the buffer of its z window
+/// (kept between steps).
+#[derive(Clone, Debug, Default)]
+pub(super) struct BlockStats {
     distance_sum: f64,
     distance_max: f64,
     kinetic: f64,
     diverged: Option<(usize, &'static str, f64)>,
+    window: Vec<f64>,
+}
+
+impl BlockStats {
+    pub fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + self.window.capacity() * std::mem::size_of::<f64>()
+    }
+
+    /// Statistics of 0 and a window buffer of `len` values.
+    pub fn with_window(len: usize) -> Self {
+        Self { window: vec![0.0; len], ..Self::default() }
+    }
+
+    fn reset(&mut self) {
+        (self.distance_sum, self.distance_max, self.kinetic, self.diverged) = (0.0, 0.0, 0.0, None);
+    }
 }
 
 impl Lattice {
@@ -228,7 +256,7 @@ impl Lattice {
             &self.x,
             &self.v,
             &self.rotation,
-            &mut self.rings,
+            &mut self.fit_scratch,
             &mut self.spread,
             &mut self.rotation_next,
         );
@@ -244,26 +272,18 @@ impl Lattice {
         let pinned = self.pinned.as_deref();
         let force = self.force.as_deref();
         let block_rows = row_block(passes.w, rows);
-        let mut blocks: Vec<UpdateBlock> = self
-            .x_next
-            .chunks_mut(block_rows * columns)
-            .zip(self.v_next.chunks_mut(block_rows * columns))
-            .enumerate()
-            .map(|(index, (x, v))| UpdateBlock {
-                index,
-                x,
-                v,
-                distance_sum: 0.0,
-                distance_max: 0.0,
-                kinetic: 0.0,
-                diverged: None,
-            })
-            .collect();
+        let blocks = rows.div_ceil(block_rows);
+        self.block_stats.resize(blocks, BlockStats::default());
+        self.block_stats.iter_mut().for_each(BlockStats::reset);
+        let (x_next, v_next) = (SharedSlice::new(&mut self.x_next), SharedSlice::new(&mut self.v_next));
         let passes = &passes;
-        self.pool.for_each_chunk_mut(&mut blocks, 1, |_, block| {
+        self.pool.for_each_chunk_mut(&mut self.block_stats, 1, |index, block| {
             for b in block.iter_mut() {
-                let k0 = b.index * block_rows;
-                let mut window = RowWindow::new(spread, columns * fc, rows, passes.w, k0);
+                let k0 = index * block_rows;
+                let rows_of_block = k0 * columns..(k0 + block_rows).min(rows) * columns;
+                // SAFETY: the sites of block `index`, written by this task alone.
+                let (new_x, new_v) = unsafe { (x_next.part(rows_of_block.clone()), v_next.part(rows_of_block)) };
+                let mut window = RowWindow::new(spread, columns * fc, rows, passes.w, k0, &mut b.window);
                 for k in k0..(k0 + block_rows).min(rows) {
                     let sums_row = window.current();
                     for c in 0..columns {
@@ -271,8 +291,8 @@ impl Lattice {
                         let local = s - k0 * columns;
                         let rest = &passes.rest[s];
                         if rest.share == 0.0 {
-                            b.x[local] = x[s];
-                            b.v[local] = v[s];
+                            new_x[local] = x[s];
+                            new_v[local] = v[s];
                             continue;
                         }
                         let sums = &sums_row[c * fc..(c + 1) * fc];
@@ -283,8 +303,8 @@ impl Lattice {
                         b.distance_sum += distance;
                         b.distance_max = b.distance_max.max(distance);
                         if pinned.is_some_and(|p| p[s]) {
-                            b.x[local] = x[s];
-                            b.v[local] = [0.0; 3];
+                            new_x[local] = x[s];
+                            new_v[local] = [0.0; 3];
                             continue;
                         }
                         let mut vel = DVec3::from(v[s]);
@@ -298,19 +318,19 @@ impl Lattice {
                             accel += DVec3::from(f[s]) / mass;
                         }
                         vel = vel * keep + to_goal * (alpha / h) + accel * h;
-                        let new_x = DVec3::from(x[s]) + vel * h;
+                        let moved = DVec3::from(x[s]) + vel * h;
                         b.kinetic += 0.5 * mass * vel.length_squared();
                         if b.diverged.is_none() {
                             let speed = vel.length();
-                            let reach = new_x.abs().max_element();
-                            if !new_x.is_finite() || reach > POSITION_LIMIT {
+                            let reach = moved.abs().max_element();
+                            if !moved.is_finite() || reach > POSITION_LIMIT {
                                 b.diverged = Some((s, "position", reach));
                             } else if speed.is_nan() || speed > SPEED_LIMIT {
                                 b.diverged = Some((s, "speed", speed));
                             }
                         }
-                        b.x[local] = new_x.to_array();
-                        b.v[local] = vel.to_array();
+                        new_x[local] = moved.to_array();
+                        new_v[local] = vel.to_array();
                     }
                     window.advance();
                 }
@@ -320,7 +340,7 @@ impl Lattice {
         let particles = self.layout.particle_count() as f64;
         let mut stats = StepStats::default();
         let mut distance_sum = 0.0;
-        for b in &blocks {
+        for b in &self.block_stats {
             if let Some((s, what, value)) = b.diverged {
                 return Err(self.divergence_error(s, what, value));
             }
@@ -331,7 +351,6 @@ impl Lattice {
         if !stats.kinetic_energy.is_finite() {
             return Err(self.divergence_error(self.layout.site_of_particle(0), "kinetic energy", stats.kinetic_energy));
         }
-        drop(blocks);
         std::mem::swap(&mut self.x, &mut self.x_next);
         std::mem::swap(&mut self.v, &mut self.v_next);
         std::mem::swap(&mut self.rotation, &mut self.rotation_next);
@@ -379,14 +398,15 @@ impl Lattice {
         let (columns, rows) = (self.layout.columns(), self.layout.rows());
         let n = self.layout.site_count();
         let fc = passes.fit_channels;
-        let mut rings = vec![Vec::new(); self.pool.threads()];
+        let mut rings = vec![FitScratch::default(); self.pool.threads()];
         let mut rotation_out = vec![[0.0; 6]; n];
         let mut spread = vec![0.0; n * fc];
         passes.fit(&self.pool, &self.x, &self.v, &self.rotation, &mut rings, &mut spread, &mut rotation_out);
         let mut goals = vec![[0.0; 3]; n];
         let block_rows = row_block(passes.w, rows);
+        let mut window_sums = Vec::new();
         for k0 in (0..rows).step_by(block_rows) {
-            let mut window = RowWindow::new(&spread, columns * fc, rows, passes.w, k0);
+            let mut window = RowWindow::new(&spread, columns * fc, rows, passes.w, k0, &mut window_sums);
             for k in k0..(k0 + block_rows).min(rows) {
                 for c in 0..columns {
                     let s = k * columns + c;

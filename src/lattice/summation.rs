@@ -131,22 +131,25 @@ fn sub(acc: &mut [f64], row: &[f64]) {
 
 /// The running sum along z: the sum of rows `k-w ..= k+w` (clipped) of `src` for consecutive
 /// rows `k`, starting at `k0`. Each row of `src` holds `stride` values (already summed along x).
+/// The sums are kept in the caller's buffer (a window per block of rows every step allocated
+/// one otherwise).
 pub(crate) struct RowWindow<'a> {
     src: &'a [f64],
     stride: usize,
     rows: usize,
     w: usize,
     k: usize,
-    acc: Vec<f64>,
+    acc: &'a mut Vec<f64>,
 }
 
 impl<'a> RowWindow<'a> {
-    /// A window centred on row `k0`.
-    pub(crate) fn new(src: &'a [f64], stride: usize, rows: usize, w: usize, k0: usize) -> Self {
-        let mut acc = vec![0.0; stride];
+    /// A window centred on row `k0`, its sums in `acc` (resized).
+    pub(crate) fn new(src: &'a [f64], stride: usize, rows: usize, w: usize, k0: usize, acc: &'a mut Vec<f64>) -> Self {
+        acc.clear();
+        acc.resize(stride, 0.0);
         let last = (k0 + w).min(rows - 1);
         for j in k0.saturating_sub(w)..=last {
-            add(&mut acc, &src[j * stride..(j + 1) * stride]);
+            add(acc, &src[j * stride..(j + 1) * stride]);
         }
         Self { src, stride, rows, w, k: k0, acc }
     }
@@ -154,7 +157,7 @@ impl<'a> RowWindow<'a> {
     /// The box sums of every site of the current row (`stride` values).
     #[inline]
     pub(crate) fn current(&self) -> &[f64] {
-        &self.acc
+        self.acc
     }
 
     /// Moves to the next row: `B(k+1) = B(k) + row(k+w+1) - row(k-w)`.
@@ -162,7 +165,7 @@ impl<'a> RowWindow<'a> {
         let (k, w, s) = (self.k, self.w, self.stride);
         let entering = (k + w + 1 < self.rows).then(|| &self.src[(k + w + 1) * s..(k + w + 2) * s]);
         let leaving = (k >= w).then(|| &self.src[(k - w) * s..(k - w + 1) * s]);
-        shift_rows(&mut self.acc, entering, leaving);
+        shift_rows(self.acc, entering, leaving);
         self.k += 1;
     }
 }
@@ -177,8 +180,9 @@ pub(crate) fn box_sum(src: &[f64], columns: usize, rows: usize, ch: usize, w: us
     }
     let mut out = vec![0.0; src.len()];
     let block = row_block(w, rows);
+    let mut acc = Vec::new();
     for k0 in (0..rows).step_by(block) {
-        let mut window = RowWindow::new(&bx, stride, rows, w, k0);
+        let mut window = RowWindow::new(&bx, stride, rows, w, k0, &mut acc);
         for k in k0..(k0 + block).min(rows) {
             out[k * stride..(k + 1) * stride].copy_from_slice(window.current());
             window.advance();

@@ -1,0 +1,267 @@
+//! A step that changes no topology allocates nothing: an engine steps a body, a shell or a lattice
+//! every frame, and a heap allocation per frame (or per conjugate-gradient iteration) is a lock
+//! and a cache miss it did not ask for, and a latency spike under a busy allocator.
+//!
+//! A counting global allocator sees every allocation of every thread of this test binary (the
+//! library's worker threads too), so the whole check is one `#[test]`: no other test runs
+//! beside it. Each scene is warmed up first (buffers are sized by the first steps and by the
+//! largest contact set seen), then stepped on with the counter read around each step.
+//!
+//! Steps that change the topology (a crack, a core block) may allocate: the mesh grows. The
+//! fracture scenes here have break limits set but high enough that nothing breaks, so they
+//! check that the fracture bookkeeping itself allocates nothing per step.
+//!
+//! Two exceptions, asserted as such: the implicit integrator's team region on two threads
+//! starts its second member through rayon's scope, which allocates one job record per substep
+//! (a join would make the calling thread sleep; see `WorkerPool::team_of`); and a shell's
+//! collision buffers (the cached contact pairs, the CCD queues) grow to the largest contact set
+//! seen so far, so a step may enlarge them but frees nothing (no temporaries).
+#![cfg(all(feature = "shell", feature = "body", feature = "lattice"))]
+
+mod body_util;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use body_util::*;
+use softshell::ffi::body::*;
+use softshell::ffi::lattice::*;
+use softshell::ffi::shell::*;
+use softshell::ffi::{SoftshellBodyDef, SoftshellLatticeStats, SoftshellShellStats, SoftshellStatus};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+static FREES: AtomicUsize = AtomicUsize::new(0);
+static COUNTING: AtomicBool = AtomicBool::new(false);
+
+// SAFETY: forwards every call to the system allocator unchanged; only counts.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: the caller's layout, as GlobalAlloc::alloc requires.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: as above.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: ptr came from this allocator with this layout.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        if COUNTING.load(Ordering::Relaxed) {
+            FREES.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: ptr came from this allocator with this layout.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Allocations (or reallocations) and frees made on any thread while `f` ran.
+fn allocations_in(f: impl FnOnce()) -> Counts {
+    ALLOCATIONS.store(0, Ordering::SeqCst);
+    FREES.store(0, Ordering::SeqCst);
+    COUNTING.store(true, Ordering::SeqCst);
+    f();
+    COUNTING.store(false, Ordering::SeqCst);
+    Counts { allocations: ALLOCATIONS.load(Ordering::SeqCst), frees: FREES.load(Ordering::SeqCst) }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Counts {
+    allocations: usize,
+    frees: usize,
+}
+
+const WARM_UP: usize = 30;
+const MEASURED: usize = 30;
+
+/// Steps `WARM_UP` times, then `MEASURED` times counting; returns each measured step's number
+/// (from 1) and counts.
+fn count_steps(mut step: impl FnMut()) -> Vec<(usize, Counts)> {
+    for _ in 0..WARM_UP {
+        step();
+    }
+    (0..MEASURED).map(|k| (WARM_UP + k + 1, allocations_in(&mut step))).collect()
+}
+
+/// The steps among `counts` that broke the rule `allowed`.
+fn breaking(counts: &[(usize, Counts)], allowed: impl Fn(&Counts) -> bool) -> Vec<(usize, Counts)> {
+    counts.iter().copied().filter(|(_, c)| !allowed(c)).collect()
+}
+
+fn body_step(body: &Body) -> SoftshellBodyStats {
+    let mut stats = SoftshellBodyStats::default();
+    // SAFETY: live body, writable stats.
+    let status = unsafe { softshell_body_step(body.0, &mut stats) };
+    assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+    stats
+}
+
+fn body_scenes() -> Vec<(String, SoftshellBodyDef, Option<&'static str>)> {
+    let base = SoftshellBodyDef { total_mass: 1.0, ..softshell_body_def_default() };
+    let integrators = [
+        ("explicit Euler", SOFTSHELL_INTEGRATOR_EXPLICIT_EULER),
+        ("symplectic Euler", SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER),
+        ("implicit Euler", SOFTSHELL_INTEGRATOR_IMPLICIT_EULER),
+        ("XPBD", SOFTSHELL_INTEGRATOR_XPBD),
+    ];
+    let mut scenes = Vec::new();
+    for (name, integrator) in integrators {
+        // The explicit integrators need small steps at the default stiffness.
+        let substeps = if integrator <= SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER { 150 } else { 1 };
+        let def = SoftshellBodyDef { integrator, substeps, ..base };
+        let plain = SoftshellBodyDef { gravity: [0.0; 3], ..def };
+        scenes.push((format!("{name}, plain"), plain, None));
+        scenes.push((format!("{name}, 2 threads"), SoftshellBodyDef { threads: 2, ..plain }, None));
+        let dropped = SoftshellBodyDef { gas_amount: 50.0, ground: true, ground_height: -1.05, ..def };
+        scenes.push((format!("{name}, gas on the ground"), dropped, None));
+        scenes.push((
+            format!("{name}, gas on the ground, 2 threads"),
+            SoftshellBodyDef { threads: 2, ..dropped },
+            None,
+        ));
+        scenes.push((format!("{name}, wind"), SoftshellBodyDef { wind: [3.0, 0.0, 1.0], drag: 0.5, ..dropped }, None));
+        scenes.push((format!("{name}, sphere obstacle"), dropped, Some("sphere")));
+        let unbroken = SoftshellBodyDef { break_strain: 10.0, break_force: 1e6, leak_rate: 1.0, ..dropped };
+        scenes.push((format!("{name}, break limits that nothing reaches"), unbroken, None));
+    }
+    scenes
+}
+
+#[test]
+fn steps_that_change_no_topology_allocate_nothing() {
+    let mut failures = Vec::new();
+
+    let (p, t) = icosphere(3, 1.0);
+    for (name, def, obstacle) in body_scenes() {
+        let body = body(&p, &t, &def);
+        if obstacle.is_some() {
+            // SAFETY: live body, three floats.
+            let status = unsafe { softshell_body_add_sphere_obstacle(body.0, [0.3, -1.6, 0.0].as_ptr(), 0.6) };
+            assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+        }
+        // SAFETY: live body.
+        let generation = || unsafe { softshell_body_topology_generation(body.0) };
+        let before = generation();
+        let counts = count_steps(|| {
+            body_step(&body);
+        });
+        assert_eq!(generation(), before, "{name}: the topology changed; the scene does not test what it says");
+        // The implicit team on two threads: rayon's job record for its second member, one per
+        // substep (made and freed in the step), and now and then a block of rayon's job queue
+        // (one per 63 jobs).
+        let team_jobs = if def.integrator == SOFTSHELL_INTEGRATOR_IMPLICIT_EULER && def.threads == 2 {
+            def.substeps as usize
+        } else {
+            0
+        };
+        let wrong = breaking(&counts, |c| c.allocations <= team_jobs + usize::from(team_jobs > 0));
+        let total: usize = counts.iter().map(|(_, c)| c.allocations).sum();
+        if !wrong.is_empty() || total > MEASURED * team_jobs + MEASURED.div_ceil(63) * team_jobs {
+            failures
+                .push(format!("body, {name}: {team_jobs} a step allowed, {total} in all: (step, counts) {wrong:?}"));
+        }
+    }
+
+    let (p, t) = report_sphere();
+    for collisions in [false, true] {
+        for threads in [1, 2] {
+            let def = SoftshellShellDef {
+                collisions,
+                threads,
+                stop_volume_ratio: 0.0,
+                pressure: 3.0,
+                ..softshell_shell_def_default()
+            };
+            let mut shell = std::ptr::null_mut();
+            let mesh = Mesh::new(&p, &t);
+            // SAFETY: live mesh and def, writable out-pointer.
+            let status = unsafe { softshell_shell_new(mesh.0, &def, &mut shell) };
+            assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+            let mut contacts = 0;
+            let counts = count_steps(|| {
+                let mut stats = SoftshellShellStats::default();
+                // SAFETY: live shell, writable stats.
+                let status = unsafe { softshell_shell_step(shell, &mut stats) };
+                assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+                contacts += stats.contacts;
+            });
+            // SAFETY: made above, freed once.
+            unsafe { softshell_shell_free(shell) };
+            // With collisions: buffers that grow (reallocations, or a first allocation), no
+            // temporaries (each would be freed in its step), and not many growths.
+            let wrong = if collisions {
+                breaking(&counts, |c| c.frees == 0)
+            } else {
+                breaking(&counts, |c| c.allocations == 0)
+            };
+            let growths: usize = counts.iter().map(|(_, c)| c.allocations).sum();
+            if !wrong.is_empty() || growths > 64 {
+                failures.push(format!(
+                    "shell, collisions {collisions}, {threads} threads ({growths} allocations in all): (step, counts) \
+                     {wrong:?}"
+                ));
+            }
+            if collisions {
+                assert!(contacts > 0, "the collision scene met no contact: it does not test what it says");
+            }
+        }
+    }
+
+    for threads in [1, 2] {
+        for forced in [false, true] {
+            let def = SoftshellLatticeDef { threads, ..softshell_lattice_def_default() };
+            let mut lattice = std::ptr::null_mut();
+            // SAFETY: live def, NULL mask (a full sheet), writable out-pointer.
+            let status = unsafe { softshell_lattice_new(&def, std::ptr::null(), &mut lattice) };
+            assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+            if forced {
+                // SAFETY: live lattice.
+                unsafe {
+                    assert_eq!(softshell_lattice_pin(lattice, 0, 0), SoftshellStatus::Ok, "{}", last_error());
+                    let f = [0.0f32, 0.0, 5.0];
+                    assert_eq!(
+                        softshell_lattice_apply_force(lattice, 3, 3, f.as_ptr()),
+                        SoftshellStatus::Ok,
+                        "{}",
+                        last_error()
+                    );
+                }
+            }
+            let counts = count_steps(|| {
+                let mut stats = SoftshellLatticeStats::default();
+                // SAFETY: live lattice, writable stats.
+                let status = unsafe { softshell_lattice_step(lattice, &mut stats) };
+                assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+            });
+            // SAFETY: made above, freed once.
+            unsafe { softshell_lattice_free(lattice) };
+            let wrong = breaking(&counts, |c| c.allocations == 0);
+            if !wrong.is_empty() {
+                failures
+                    .push(format!("lattice, {threads} threads, pinned and pushed {forced}: (step, counts) {wrong:?}"));
+            }
+        }
+    }
+
+    assert!(failures.is_empty(), "steps that allocated:\n{}", failures.join("\n"));
+}
+
+/// The shell's test sphere (the icosphere above, 642 vertices, radius 0.5).
+fn report_sphere() -> (Vec<f32>, Vec<u32>) {
+    icosphere(3, 0.5)
+}
