@@ -433,7 +433,9 @@ pub unsafe extern "C" fn softshell_lattice_triangle_count(lattice: *const Softsh
 
 /// Heap bytes the lattice holds (the worker threads and the thread pool's own bookkeeping, inside
 /// rayon, excluded); 0 for NULL. Storage for region damping, pins and forces exists only when
-/// they are used. A step allocates nothing (its scratch is made with the lattice).
+/// they are used; once made it is kept (unpinning every particle or a step clearing the forces
+/// does not release it), so forces applied every step allocate nothing after the first. A step
+/// allocates nothing (its scratch is made with the lattice).
 ///
 /// # Safety
 /// `lattice` must be NULL or a live lattice.
