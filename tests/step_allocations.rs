@@ -19,6 +19,7 @@
 #![cfg(all(feature = "shell", feature = "body", feature = "lattice"))]
 
 mod body_util;
+mod report_util;
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -33,6 +34,7 @@ struct Counting;
 
 static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
 static FREES: AtomicUsize = AtomicUsize::new(0);
+static SHRINKS: AtomicUsize = AtomicUsize::new(0);
 static COUNTING: AtomicBool = AtomicBool::new(false);
 
 // SAFETY: forwards every call to the system allocator unchanged; only counts.
@@ -54,6 +56,9 @@ unsafe impl GlobalAlloc for Counting {
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
         if COUNTING.load(Ordering::Relaxed) {
             ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+            if new_size < layout.size() {
+                SHRINKS.fetch_add(1, Ordering::Relaxed);
+            }
         }
         // SAFETY: ptr came from this allocator with this layout.
         unsafe { System.realloc(ptr, layout, new_size) }
@@ -74,16 +79,23 @@ static GLOBAL: Counting = Counting;
 fn allocations_in(f: impl FnOnce()) -> Counts {
     ALLOCATIONS.store(0, Ordering::SeqCst);
     FREES.store(0, Ordering::SeqCst);
+    SHRINKS.store(0, Ordering::SeqCst);
     COUNTING.store(true, Ordering::SeqCst);
     f();
     COUNTING.store(false, Ordering::SeqCst);
-    Counts { allocations: ALLOCATIONS.load(Ordering::SeqCst), frees: FREES.load(Ordering::SeqCst) }
+    Counts {
+        allocations: ALLOCATIONS.load(Ordering::SeqCst),
+        frees: FREES.load(Ordering::SeqCst),
+        shrinks: SHRINKS.load(Ordering::SeqCst),
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Counts {
     allocations: usize,
     frees: usize,
+    /// Reallocations to a smaller size (a buffer giving memory back, to grow again later).
+    shrinks: usize,
 }
 
 const WARM_UP: usize = 30;
@@ -91,11 +103,15 @@ const MEASURED: usize = 30;
 
 /// Steps `WARM_UP` times, then `MEASURED` times counting; returns each measured step's number
 /// (from 1) and counts.
-fn count_steps(mut step: impl FnMut()) -> Vec<(usize, Counts)> {
-    for _ in 0..WARM_UP {
+fn count_steps(step: impl FnMut()) -> Vec<(usize, Counts)> {
+    count_steps_after(WARM_UP, MEASURED, step)
+}
+
+fn count_steps_after(warm_up: usize, measured: usize, mut step: impl FnMut()) -> Vec<(usize, Counts)> {
+    for _ in 0..warm_up {
         step();
     }
-    (0..MEASURED).map(|k| (WARM_UP + k + 1, allocations_in(&mut step))).collect()
+    (0..measured).map(|k| (warm_up + k + 1, allocations_in(&mut step))).collect()
 }
 
 /// The steps among `counts` that broke the rule `allowed`.
@@ -177,48 +193,53 @@ fn steps_that_change_no_topology_allocate_nothing() {
         }
     }
 
-    let (p, t) = report_sphere();
-    for collisions in [false, true] {
-        for threads in [1, 2] {
-            let def = SoftshellShellDef {
-                collisions,
-                threads,
-                stop_volume_ratio: 0.0,
-                pressure: 3.0,
-                ..softshell_shell_def_default()
-            };
-            let mut shell = std::ptr::null_mut();
-            let mesh = Mesh::new(&p, &t);
-            // SAFETY: live mesh and def, writable out-pointer.
-            let status = unsafe { softshell_shell_new(mesh.0, &def, &mut shell) };
-            assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
-            let mut contacts = 0;
-            let counts = count_steps(|| {
-                let mut stats = SoftshellShellStats::default();
-                // SAFETY: live shell, writable stats.
-                let status = unsafe { softshell_shell_step(shell, &mut stats) };
-                assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
-                contacts += stats.contacts;
-            });
-            // SAFETY: made above, freed once.
-            unsafe { softshell_shell_free(shell) };
-            // With collisions: buffers that grow (reallocations, or a first allocation), no
-            // temporaries (each would be freed in its step), and not many growths.
-            let wrong = if collisions {
-                breaking(&counts, |c| c.frees == 0)
-            } else {
-                breaking(&counts, |c| c.allocations == 0)
-            };
-            let growths: usize = counts.iter().map(|(_, c)| c.allocations).sum();
-            if !wrong.is_empty() || growths > 64 {
-                failures.push(format!(
-                    "shell, collisions {collisions}, {threads} threads ({growths} allocations in all): (step, counts) \
-                     {wrong:?}"
-                ));
-            }
-            if collisions {
-                assert!(contacts > 0, "the collision scene met no contact: it does not test what it says");
-            }
+    // The shell: a sphere without and with collisions (contacts from about step 30), and the
+    // figure-eight squeezed until its loops press together, where CCD queries split many
+    // domains (before the search queues were kept at their size, 37 of its steps 10-150
+    // allocated).
+    let sphere = report_sphere();
+    let eight = report_util::unit_obj("eight.obj", 1.0);
+    let default = softshell_shell_def_default();
+    let scenes = [
+        ("sphere", &sphere, false, 1, 3.0, WARM_UP, MEASURED),
+        ("sphere", &sphere, false, 2, 3.0, WARM_UP, MEASURED),
+        ("sphere", &sphere, true, 1, 3.0, WARM_UP, MEASURED),
+        ("sphere", &sphere, true, 2, 3.0, WARM_UP, MEASURED),
+        ("eight.obj", &eight, true, 1, 30.0 * default.pressure, 100, 50),
+    ];
+    for (mesh_name, (p, t), collisions, threads, pressure, warm_up, measured) in scenes {
+        let def = SoftshellShellDef { collisions, threads, stop_volume_ratio: 0.0, pressure, ..default };
+        let mut shell = std::ptr::null_mut();
+        let mesh = Mesh::new(p, t);
+        // SAFETY: live mesh and def, writable out-pointer.
+        let status = unsafe { softshell_shell_new(mesh.0, &def, &mut shell) };
+        assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+        let mut contacts = 0;
+        let counts = count_steps_after(warm_up, measured, || {
+            let mut stats = SoftshellShellStats::default();
+            // SAFETY: live shell, writable stats.
+            let status = unsafe { softshell_shell_step(shell, &mut stats) };
+            assert_eq!(status, SoftshellStatus::Ok, "{mesh_name}: {}", last_error());
+            contacts += stats.contacts;
+        });
+        // SAFETY: made above, freed once.
+        unsafe { softshell_shell_free(shell) };
+        // With collisions: buffers that grow (reallocations, or a first allocation), no
+        // temporaries (each would be freed in its step), none given back, few growths.
+        let wrong = if collisions {
+            breaking(&counts, |c| c.frees == 0 && c.shrinks == 0)
+        } else {
+            breaking(&counts, |c| c.allocations == 0)
+        };
+        let growths: usize = counts.iter().map(|(_, c)| c.allocations).sum();
+        if !wrong.is_empty() || growths > 64 {
+            failures.push(format!(
+                "shell {mesh_name}, collisions {collisions}, {threads} threads ({growths} allocations in all): (step, \
+                 counts) {wrong:?}"
+            ));
+        }
+        if collisions {
+            assert!(contacts > 0, "{mesh_name}: the collision scene met no contact: it does not test what it says");
         }
     }
 

@@ -147,7 +147,7 @@ fn face_term(o: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f64 {
     ((ax * cx + ay * cy) + az * cz) as f64
 }
 
-/// The origin of each fragment's volume sums by fragment ([`Gas::origin_of`]).
+/// The origin of each fragment's volume sums by fragment ([`origin_of`]).
 trait Origin: Fn(usize) -> DVec3 + Copy {}
 impl<F: Fn(usize) -> DVec3 + Copy> Origin for F {}
 

@@ -124,8 +124,9 @@ pub struct Body {
     scratch: Scratch,
     /// The buffers of the energy measurement ([`energy::state_energies`]).
     energy_sums: energy::EnergySums,
-    /// The loads of the `break_force` check ([`Body::loads`]) and the gas gradient they are
-    /// measured with: empty unless the body has a `break_force`.
+    /// Per-vertex forces and the gas gradient they are measured with, for the `break_force`
+    /// check ([`Body::measure_loads`]) and the divergence test's bound ([`Body::impulse_bound`]):
+    /// made when first needed (every step with a `break_force`), then kept.
     load: Vec<Vec3>,
     load_gradient: Vec<Vec3>,
     steps: u64,
@@ -601,7 +602,10 @@ impl Body {
     fn impulse_bound(&mut self, h: f32) -> f64 {
         std::mem::swap(&mut self.nodes.x, &mut self.saved_x);
         std::mem::swap(&mut self.nodes.v, &mut self.saved_v);
-        let mut f = self.internal_forces();
+        // In the kept buffers (nothing reads the loads between their measurement at the end of
+        // a step and this test, which runs before it).
+        let (mut f, mut gradient) = (std::mem::take(&mut self.load), std::mem::take(&mut self.load_gradient));
+        self.internal_forces_into(&mut f, &mut gradient);
         for (fi, &m) in f.iter_mut().zip(&self.nodes.mass) {
             *fi += self.settings.gravity * m;
         }
@@ -609,7 +613,7 @@ impl Body {
             let h = self.settings.time_step / self.settings.substeps.max(1) as f32;
             let state =
                 DragState { x: &self.nodes.x, v: &self.nodes.v, triangles: &self.triangles, mass: &self.nodes.mass, h };
-            add_wind(&state, self.settings.wind, self.settings.drag, &mut f, &mut Vec::new());
+            add_wind(&state, self.settings.wind, self.settings.drag, &mut f, &mut self.wind_coefficient);
         }
         std::mem::swap(&mut self.nodes.x, &mut self.saved_x);
         std::mem::swap(&mut self.nodes.v, &mut self.saved_v);
@@ -621,10 +625,13 @@ impl Body {
         if let Scratch::Implicit(s) = &mut self.scratch {
             s.forget_prepared();
         }
-        f.iter()
+        let bound = f
+            .iter()
             .zip(&self.nodes.inv_mass)
             .map(|(fi, &w)| 0.5 * (h as f64 * fi.length() as f64).powi(2) * w as f64)
-            .sum()
+            .sum();
+        (self.load, self.load_gradient) = (f, gradient);
+        bound
     }
 
     /// What a step may make beyond the energy `available` to it before the one-step kinetic
@@ -1183,7 +1190,7 @@ impl Body {
 
     /// The load of every vertex at the end of a step, for `break_force` (SPEC 2.4), into
     /// `self.load` (kept between steps: two per-vertex arrays were allocated every step): the
-    /// net internal force ([`Body::internal_forces`]), but for an XPBD body the forces its
+    /// net internal force ([`Body::internal_forces_into`]), but for an XPBD body the forces its
     /// constraints applied in the step's last substep ([`xpbd::add_applied_forces`]: its
     /// positions are not those of converged spring and gas laws).
     fn measure_loads(&mut self) {
@@ -1203,16 +1210,18 @@ impl Body {
         (self.load, self.load_gradient) = (f, gradient);
     }
 
-    /// Net internal force (springs, damping, gas) on every vertex at the current state, by the
-    /// spring and gas laws (also for XPBD: the divergence test's bound, [`Body::impulse_bound`],
-    /// is the kinetic energy these laws give from rest, whatever an integrator applied).
+    /// Tests: [`Body::internal_forces_into`] into new vectors.
+    #[cfg(test)]
     fn internal_forces(&mut self) -> Vec<Vec3> {
         let (mut f, mut gradient) = (Vec::new(), Vec::new());
         self.internal_forces_into(&mut f, &mut gradient);
         f
     }
 
-    /// [`Body::internal_forces`] into `f`, with `gradient` for the gas's volume gradient (both
+    /// Net internal force (springs, damping, gas) on every vertex at the current state, by the
+    /// spring and gas laws (also for XPBD: the divergence test's bound, [`Body::impulse_bound`],
+    /// is the kinetic energy these laws give from rest, whatever an integrator applied), into
+    /// `f`, with `gradient` for the gas's volume gradient (both
     /// resized to the vertex count).
     fn internal_forces_into(&mut self, f: &mut Vec<Vec3>, gradient: &mut Vec<Vec3>) {
         let n = self.nodes.len();

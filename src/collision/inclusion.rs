@@ -63,8 +63,11 @@ trait Domain: Copy {
 
 /// The search queues of the two kinds of query, kept by their owner between queries (a shell's
 /// collision stage makes many per step: a fresh queue allocated its heap, slab and free list on
-/// every query that split a domain). A queue that grew past [`KEPT_QUEUE_ENTRIES`] gives the
-/// rest of its memory back after its query.
+/// every query that split a domain). They grow to what the largest query so far needed, at
+/// most two domains per examined one, so the box budget (`max_boxes`) bounds them: about 170
+/// KB for both kinds at the default budget of 1,024. (Shrinking them after a large query made
+/// the next large one allocate again: a shell's steps with contacts kept allocating; found by
+/// review.)
 #[derive(Clone, Debug, Default)]
 pub struct SearchQueues {
     vertex_triangle: Queue<VfDomain>,
@@ -77,10 +80,6 @@ impl SearchQueues {
         self.vertex_triangle.memory_bytes() + self.edge_edge.memory_bytes()
     }
 }
-
-/// The most entries a queue keeps allocated between queries: with both kinds of domain at most
-/// about 40 KB (a query that splits at all queues a few dozen).
-const KEPT_QUEUE_ENTRIES: usize = 256;
 
 /// Number of time buckets of the queue: 2^20 (a bucket is about 1e-6 of the step).
 const TIME_BUCKETS: f64 = (1u64 << 20) as f64;
@@ -128,12 +127,6 @@ impl<B> Queue<B> {
         self.free.clear();
     }
 
-    fn shrink_to(&mut self, entries: usize) {
-        self.heap.shrink_to(entries);
-        self.slab.shrink_to(entries);
-        self.free.shrink_to(entries);
-    }
-
     fn memory_bytes(&self) -> usize {
         self.heap.capacity() * 8 + self.slab.capacity() * std::mem::size_of::<B>() + self.free.capacity() * 4
     }
@@ -175,10 +168,7 @@ impl<B: Domain> Queue<B> {
 /// deepest), so it is examined at once without a trip through the queue.
 fn earliest<B: Domain>(queue: &mut Queue<B>, root: B, max_boxes: u32, examine: impl FnMut(&B) -> Verdict<B>) -> Search {
     queue.clear();
-    let found = search(queue, root, max_boxes, examine);
-    queue.clear();
-    queue.shrink_to(KEPT_QUEUE_ENTRIES);
-    found
+    search(queue, root, max_boxes, examine)
 }
 
 fn search<B: Domain>(

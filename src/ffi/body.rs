@@ -735,7 +735,8 @@ pub unsafe extern "C" fn softshell_body_fragment_count(body: *const SoftshellBod
 /// the solver's per-vertex buffers are still rebuilt or grown after a crack, so the figure can
 /// rise then. A step that changes no topology allocates nothing once the body has taken its
 /// first steps (its scratch is sized by them); on several threads the implicit integrator's
-/// solve still asks the thread pool for one small job record per substep. 0 for NULL.
+/// solve still asks the thread pool for a small job record per substep for each worker that
+/// joins it (and with more than 4 threads for their claim counters). 0 for NULL.
 ///
 /// # Safety
 /// `body` must be NULL or a live body.
