@@ -1166,6 +1166,13 @@ struct MemberGas<'a> {
     end_scale: &'a mut [f32],
 }
 
+/// The length of a member's share of the [`MemberGas`] buffers holding `values` values: rounded
+/// up to 32 values (128 bytes of f32, two cache lines of f64), so that two members never write
+/// the same cache line (they write these every iteration).
+fn member_stride(values: usize) -> usize {
+    values.next_multiple_of(32)
+}
+
 /// Per-chunk sums of the team passes.
 #[derive(Default)]
 struct ChunkSums {
@@ -1218,8 +1225,8 @@ impl ChunkSums {
 
     /// Room for [`MemberGas`] of `members` members and `fragments` fragments.
     fn resize_member_gas(&mut self, members: usize, fragments: usize) {
-        self.member_gas.resize(members * 3 * fragments, 0.0);
-        self.member_scale.resize(members * 2 * fragments, 0.0);
+        self.member_gas.resize(members * member_stride(3 * fragments), 0.0);
+        self.member_scale.resize(members * member_stride(2 * fragments), 0.0);
     }
 
     fn memory_bytes(&self) -> usize {
@@ -1245,7 +1252,8 @@ impl ChunkSums {
 impl Shared<'_> {
     /// This member's [`MemberGas`] for `fragments` fragments.
     fn member_gas(&self, team: &Team, fragments: usize) -> MemberGas<'_> {
-        let (first, first_scale) = (team.index() * 3 * fragments, team.index() * 2 * fragments);
+        let first = team.index() * member_stride(3 * fragments);
+        let first_scale = team.index() * member_stride(2 * fragments);
         // SAFETY: each member's own ranges (sized for every member the pool can run), used by
         // it alone, once per substep.
         unsafe {
