@@ -50,6 +50,20 @@ fn shell_without_bending_anisotropy_multipliers_or_pool_holds_none() {
     // PBD keeps no XPBD multipliers.
     let pbd = Shell::new(&p, &t, &SoftshellShellDef { solver: SOFTSHELL_SOLVER_PBD, ..shell_def() }).unwrap();
     assert!(pbd.memory() < plain, "PBD: {} vs {plain}", pbd.memory());
+    // PBD_DISTANCE holds its edges (12 bytes each, 18 a face, and their colour offsets) and not
+    // the membranes' per-triangle inverse masses (12 bytes a face), which it never projects.
+    let distance =
+        Shell::new(&p, &t, &SoftshellShellDef { solver: SOFTSHELL_SOLVER_PBD_DISTANCE, ..shell_def() }).unwrap();
+    let faces = t.len() / 3;
+    assert!(
+        distance.memory() <= pbd.memory() + (18 - 12) * faces + 1024,
+        "PBD_DISTANCE: {} vs PBD {} ({faces} faces)",
+        distance.memory(),
+        pbd.memory()
+    );
+    for _ in 0..3 {
+        distance.step().unwrap();
+    }
 
     // threads = 1: no worker pool.
     let two = Shell::new(&p, &t, &SoftshellShellDef { threads: 2, ..shell_def() }).unwrap();

@@ -197,7 +197,11 @@ impl Shell {
         let inv_mass: Vec<f32> = mass.iter().map(|&m| if m > 0.0 { (1.0 / m) as f32 } else { 0.0 }).collect();
         bendings.set_inverse_masses(&inv_mass);
         let mut membranes = membranes;
-        membranes.set_inverse_masses(&inv_mass);
+        // The distance solver projects edges only: the membranes are kept for the energy report,
+        // without the per-triangle inverse masses of their projection (12 bytes a triangle).
+        if settings.solver != SolverKind::PbdDistance {
+            membranes.set_inverse_masses(&inv_mass);
+        }
         let xpbd = settings.solver == SolverKind::Xpbd;
         let largest = n.max(triangles.len()).max(bendings.len()).max(edges.len());
         let rest_volume = crate::mesh::signed_volume(&rest, &triangles);
