@@ -765,7 +765,8 @@ size_t softshell_body_fragment_count(const struct SoftshellBody *body);
 // rise then. A step that changes no topology allocates nothing once the body has taken its
 // first steps (its scratch is sized by them); on several threads the implicit integrator's
 // solve still asks the thread pool for a small job record per substep for each worker that
-// joins it (and with more than 4 threads for their claim counters). 0 for NULL.
+// joins it (and with more than 4 threads for their claim counters), and on more than one
+// thread the pool's job queue takes a block about once every 63 steps. 0 for NULL.
 //
 // # Safety
 // `body` must be NULL or a live body.
@@ -1028,7 +1029,8 @@ size_t softshell_lattice_triangle_count(const struct SoftshellLattice *lattice);
 // rayon, excluded); 0 for NULL. Storage for region damping, pins and forces exists only when
 // they are used; once made it is kept (unpinning every particle or a step clearing the forces
 // does not release it), so forces applied every step allocate nothing after the first. A step
-// allocates nothing (its scratch is made with the lattice).
+// allocates nothing (its scratch is made with the lattice; on more than one thread the thread
+// pool's job queue takes a block about once every 63 steps).
 //
 // # Safety
 // `lattice` must be NULL or a live lattice.
@@ -1362,7 +1364,8 @@ SoftshellStatus softshell_shell_copy_vertex_curvature(const struct SoftshellShel
 // anisotropy data before a region is added, no multipliers with the PBD solver, no pool with
 // `threads = 1`. A step allocates nothing without collisions; with them it only grows the
 // contact buffers (cached pairs, contacts, CCD search queues) to the largest contact set so
-// far, so this figure can rise while the shell contracts. 0 for NULL.
+// far, so this figure can rise while the shell contracts. (On more than one thread the thread
+// pool's job queue takes a block about once every 63 steps.) 0 for NULL.
 //
 // # Safety
 // `shell` must be NULL or a live shell.

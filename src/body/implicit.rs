@@ -1167,10 +1167,11 @@ struct MemberGas<'a> {
 }
 
 /// The length of a member's share of the [`MemberGas`] buffers holding `values` values: rounded
-/// up to 32 values (128 bytes of f32, two cache lines of f64), so that two members never write
-/// the same cache line (they write these every iteration).
+/// up to 16 values and 16 more, so that 64 bytes or more (f32) lie between two members' values
+/// wherever the buffer starts, and two members never write the same cache line (they write
+/// these every iteration).
 fn member_stride(values: usize) -> usize {
-    values.next_multiple_of(32)
+    values.next_multiple_of(16) + 16
 }
 
 /// Per-chunk sums of the team passes.

@@ -63,11 +63,11 @@ trait Domain: Copy {
 
 /// The search queues of the two kinds of query, kept by their owner between queries (a shell's
 /// collision stage makes many per step: a fresh queue allocated its heap, slab and free list on
-/// every query that split a domain). They grow to what the largest query so far needed, at
-/// most two domains per examined one, so the box budget (`max_boxes`) bounds them: about 170
-/// KB for both kinds at the default budget of 1,024. (Shrinking them after a large query made
-/// the next large one allocate again: a shell's steps with contacts kept allocating; found by
-/// review.)
+/// every query that split a domain). They grow to what the largest query so far needed: at most
+/// one queued domain per examined one (a split queues one half and goes on with the other), so
+/// at most `max_boxes` entries per kind, about 150 KB for both kinds at the default budget of
+/// 1,024. (Shrinking them after a large query made the next large one allocate again: a shell's
+/// steps with contacts kept allocating; found by review.)
 #[derive(Clone, Debug, Default)]
 pub struct SearchQueues {
     vertex_triangle: Queue<VfDomain>,

@@ -736,7 +736,8 @@ pub unsafe extern "C" fn softshell_body_fragment_count(body: *const SoftshellBod
 /// rise then. A step that changes no topology allocates nothing once the body has taken its
 /// first steps (its scratch is sized by them); on several threads the implicit integrator's
 /// solve still asks the thread pool for a small job record per substep for each worker that
-/// joins it (and with more than 4 threads for their claim counters). 0 for NULL.
+/// joins it (and with more than 4 threads for their claim counters), and on more than one
+/// thread the pool's job queue takes a block about once every 63 steps. 0 for NULL.
 ///
 /// # Safety
 /// `body` must be NULL or a live body.

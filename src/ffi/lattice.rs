@@ -435,7 +435,8 @@ pub unsafe extern "C" fn softshell_lattice_triangle_count(lattice: *const Softsh
 /// rayon, excluded); 0 for NULL. Storage for region damping, pins and forces exists only when
 /// they are used; once made it is kept (unpinning every particle or a step clearing the forces
 /// does not release it), so forces applied every step allocate nothing after the first. A step
-/// allocates nothing (its scratch is made with the lattice).
+/// allocates nothing (its scratch is made with the lattice; on more than one thread the thread
+/// pool's job queue takes a block about once every 63 steps).
 ///
 /// # Safety
 /// `lattice` must be NULL or a live lattice.
