@@ -1030,7 +1030,7 @@ size_t softshell_lattice_triangle_count(const struct SoftshellLattice *lattice);
 // they are used; once made it is kept (unpinning every particle or a step clearing the forces
 // does not release it), so forces applied every step allocate nothing after the first. A step
 // allocates nothing (its scratch is made with the lattice; on more than one thread the thread
-// pool's job queue takes a block about once every 63 steps).
+// pool's job queue takes a block about once every 32 steps: a step hands it two jobs).
 //
 // # Safety
 // `lattice` must be NULL or a live lattice.
