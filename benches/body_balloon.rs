@@ -459,9 +459,12 @@ fn after_the_burst(positions: &[f32], triangles: &[u32], cracking: &SoftshellBod
         let (mut times, mut iterations, mut broken, mut last) = (Vec::new(), 0, 0, None);
         for step in 0..100 {
             let started = Instant::now();
-            let Ok(stats) = body.step() else {
-                println!("after the burst, run {run}: step {step} failed");
-                break;
+            let stats = match body.step() {
+                Ok(stats) => stats,
+                Err(e) => {
+                    println!("after the burst, run {run}: step {} failed: {e}", step + 1);
+                    break;
+                }
             };
             if step >= 60 {
                 times.push(started.elapsed().as_secs_f64() * 1e3);
