@@ -1221,8 +1221,7 @@ impl Body {
     /// Net internal force (springs, damping, gas) on every vertex at the current state, by the
     /// spring and gas laws (also for XPBD: the divergence test's bound, [`Body::impulse_bound`],
     /// is the kinetic energy these laws give from rest, whatever an integrator applied), into
-    /// `f`, with `gradient` for the gas's volume gradient (both
-    /// resized to the vertex count).
+    /// `f`, with `gradient` for the gas's volume gradient (both resized to the vertex count).
     fn internal_forces_into(&mut self, f: &mut Vec<Vec3>, gradient: &mut Vec<Vec3>) {
         let n = self.nodes.len();
         f.clear();

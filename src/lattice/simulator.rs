@@ -10,7 +10,7 @@ use super::damping::{DAMPING_FIT_CHANNELS, DAMPING_MOMENT_CHANNELS};
 use super::layout::LatticeLayout;
 use super::matching::{FIT_CHANNELS, IDENTITY_COLUMNS, MOMENT_CHANNELS, RegionRest, RotationColumns};
 use super::params::LatticeParams;
-use super::step::{BlockStats, FitScratch, POSITION_LIMIT, ring_rows};
+use super::step::{FitScratch, POSITION_LIMIT, UpdateBlock, ring_rows};
 use super::summation::{box_sum, row_block};
 use crate::error::{Error, Result};
 use crate::parallel::WorkerPool;
@@ -49,8 +49,8 @@ pub struct Lattice {
     /// Scratch: per worker thread, the fit pass's rows ([`FitScratch`]: a ring of `2w + 2` rows
     /// of particle moments summed along x, ...).
     pub(super) fit_scratch: Vec<FitScratch>,
-    /// Scratch: per block of rows, its share of the update pass's statistics.
-    pub(super) block_stats: Vec<BlockStats>,
+    /// Scratch: per block of rows, its share of the update pass's statistics and its z window.
+    pub(super) update_blocks: Vec<UpdateBlock>,
     /// Scratch: what each region hands back to its particles, summed along x.
     pub(super) spread: Vec<f64>,
     pub(super) steps: u64,
@@ -128,7 +128,7 @@ impl Lattice {
                     acc: vec![0.0; columns * moment_channels],
                 })
                 .collect(),
-            block_stats: vec![BlockStats::with_window(columns * fit_channels); rows.div_ceil(row_block(w, rows))],
+            update_blocks: vec![UpdateBlock::with_window(columns * fit_channels); rows.div_ceil(row_block(w, rows))],
             spread: vec![0.0; n * fit_channels],
             steps: 0,
             time: 0.0,
@@ -270,8 +270,8 @@ impl Lattice {
             + self.fit_scratch.iter().map(FitScratch::memory_bytes).sum::<usize>()
             + self.spread.capacity() * size_of::<f64>()
             + self.fit_scratch.capacity() * size_of::<FitScratch>()
-            + self.block_stats.iter().map(BlockStats::memory_bytes).sum::<usize>()
-            + (self.block_stats.capacity() - self.block_stats.len()) * size_of::<BlockStats>()
+            + self.update_blocks.iter().map(UpdateBlock::memory_bytes).sum::<usize>()
+            + (self.update_blocks.capacity() - self.update_blocks.len()) * size_of::<UpdateBlock>()
             + self.pool.memory_bytes()
     }
 }

@@ -215,10 +215,10 @@ impl FitScratch {
     }
 }
 
-/// A block of rows' share of the update pass's statistics, and the buffer of its z window
-/// (kept between steps).
+/// One block of rows of the update pass: its share of the statistics and the buffer of its z
+/// window (kept between steps).
 #[derive(Clone, Debug, Default)]
-pub(super) struct BlockStats {
+pub(super) struct UpdateBlock {
     distance_sum: f64,
     distance_max: f64,
     kinetic: f64,
@@ -226,7 +226,7 @@ pub(super) struct BlockStats {
     window: Vec<f64>,
 }
 
-impl BlockStats {
+impl UpdateBlock {
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>() + self.window.capacity() * std::mem::size_of::<f64>()
     }
@@ -273,11 +273,11 @@ impl Lattice {
         let force = self.force.as_deref();
         let block_rows = row_block(passes.w, rows);
         let blocks = rows.div_ceil(block_rows);
-        self.block_stats.resize(blocks, BlockStats::default());
-        self.block_stats.iter_mut().for_each(BlockStats::reset);
+        self.update_blocks.resize(blocks, UpdateBlock::default());
+        self.update_blocks.iter_mut().for_each(UpdateBlock::reset);
         let (x_next, v_next) = (SharedSlice::new(&mut self.x_next), SharedSlice::new(&mut self.v_next));
         let passes = &passes;
-        self.pool.for_each_chunk_mut(&mut self.block_stats, 1, |index, block| {
+        self.pool.for_each_chunk_mut(&mut self.update_blocks, 1, |index, block| {
             for b in block.iter_mut() {
                 let k0 = index * block_rows;
                 let rows_of_block = k0 * columns..(k0 + block_rows).min(rows) * columns;
@@ -340,7 +340,7 @@ impl Lattice {
         let particles = self.layout.particle_count() as f64;
         let mut stats = StepStats::default();
         let mut distance_sum = 0.0;
-        for b in &self.block_stats {
+        for b in &self.update_blocks {
             if let Some((s, what, value)) = b.diverged {
                 return Err(self.divergence_error(s, what, value));
             }
