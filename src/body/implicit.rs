@@ -306,7 +306,7 @@ impl ImplicitScratch {
     pub fn prepare(&mut self, model: &Model, x: &[Vec3], h: f32, threads: usize) {
         self.size_buffers(model, x.len());
         self.spring_terms.resize(model.springs.len(), SpringTerms::default());
-        if self.coarse_h != h {
+        if self.coarse_h == 0.0 {
             self.coarse = CoarseSpace::new(model, x, h, threads);
             self.coarse_h = h;
         }
@@ -1714,13 +1714,20 @@ pub(crate) fn substep(
         s.sums.end_vertices.clear();
         s.sums.end_vertices.resize(n.div_ceil(energy::VERTEX_CHUNK), (0.0, 0.0));
     }
-    // The coarse level: made once (again only if the substep length changes; after a topology
-    // change it is extended, not remade, so a cracking step costs no factorization).
-    if s.coarse_h != h {
+    // The coarse level: made once, for the first substep length (the body's own, `prepare`);
+    // after a topology change it is extended, not remade, so a cracking step costs no
+    // factorization. The step control's finer substeps (`Body::step`) go without it: their
+    // systems are better conditioned (h² K / m a quarter for each halving), and a level for
+    // each length costs a factorization (6.4 ms on the issue-5 balloon) and its allocations;
+    // on the burst balloon (the step control's main user) such levels, made from its shredded
+    // state, took the solves to their cap: its first 100 steps took 6.0 s with a level made and
+    // kept for each finer length and 1.6 s without (step 40: 486 against 106 CG iterations).
+    if s.coarse_h == 0.0 {
         s.coarse = CoarseSpace::new(model, x, h, pool.threads());
         s.coarse_h = h;
     }
-    let mut coarse = s.coarse.take();
+    let own_length = s.coarse_h == h;
+    let mut coarse = if own_length { s.coarse.take() } else { None };
     let (coarse_view, coarse_buffers) = match coarse.as_mut() {
         Some(c) => {
             let (view, buffers) = c.split();
@@ -2311,7 +2318,9 @@ pub(crate) fn substep(
         }
         s.end_energies = Some(EndEnergies { kinetic, spring, gravity, max_strain });
     }
-    s.coarse = coarse;
+    if own_length {
+        s.coarse = coarse;
+    }
     (power * h as f64, iterations)
 }
 
