@@ -733,9 +733,6 @@ impl Body {
         let growth = after.total() - before.total() - work;
         let recent = self.recent_growth * RECENT_GROWTH_DECAY + growth;
         let budget = STEP_GROWTH_SHARE * (before.kinetic + before.spring) + noise;
-        if std::env::var("PROBE_GROWTH").is_ok() {
-            eprintln!("attempt {} growth {growth:.3e} recent {recent:.3e} budget {budget:.3e}", self.subdivision);
-        }
         GrowthEvidence { recent, budget, making: growth > noise }
     }
 
