@@ -743,8 +743,8 @@ impl Body {
         let base = self.settings.substeps.max(1);
         let mut most = 1;
         while most < MAX_SUBDIVISION
-            && base * most * 2 <= MAX_SUBSTEPS
-            && self.settings.time_step / (base * most * 2) as f32 >= MIN_TIME_STEP
+            && base as u64 * most as u64 * 2 <= MAX_SUBSTEPS as u64
+            && self.settings.time_step / (base as u64 * most as u64 * 2) as f32 >= MIN_TIME_STEP
         {
             most *= 2;
         }
@@ -878,7 +878,7 @@ impl Body {
             // linearisation (implicit Euler) or projection (XPBD) moves vertices too far, so
             // halve the step and try again.
             let refined = if subdivision > 1 {
-                format!(" (its step control took it again in {subdivision} times the substeps)")
+                format!(" (in {subdivision} times the substeps, by its step control)")
             } else {
                 String::new()
             };
@@ -1025,7 +1025,7 @@ impl Body {
         };
         let before_forces_h = self.settings.time_step;
         let mut iterations = 0u64;
-        let mut clamped = false;
+        let mut clamped;
         let implicit = self.settings.integrator == Integrator::ImplicitEuler;
         let mut subdivision = if implicit { self.subdivision.clamp(1, self.max_subdivision()) } else { 1 };
         let refined_at_start = subdivision;
@@ -1037,6 +1037,8 @@ impl Body {
             work = 0.0;
             diverged = None;
             after = before;
+            // (What a rolled-back attempt clamped is not reported.)
+            clamped = false;
             for substep in 0..substeps {
                 // The gas measured at the start of the substep (the implicit integrator measures
                 // the state it ends in, for the next one), and below at its end.
@@ -2614,13 +2616,47 @@ mod tests {
         let (step, message) = failed.expect("40 steps, each overshooting elevenfold, all returned OK");
         println!("step {step}: {message}");
         assert!(message.contains("the kinetic energy grew"), "{message}");
-        assert!(message.contains("its step control took it again in 16 times the substeps"), "{message}");
+        assert!(message.contains("(in 16 times the substeps, by its step control)"), "{message}");
         // The advice: half the finest step tried (one substep here, 16 of them at the end).
         assert!(message.contains("try substeps >= 32 (h = 5.208e-4 s)"), "{message}");
         for _ in 0..=step {
             control.step().unwrap();
             assert_eq!(control.subdivision, 1);
         }
+    }
+
+    /// A step taken again by the step control reports only what the attempt it keeps did: the
+    /// same positions, velocities and `volume_clamped` as one attempt at that subdivision (a
+    /// rolled-back attempt that clamped the gas was reported as clamped; found by review). The
+    /// floating gas ball with its clamp set just under its volume, and a fault that moves the
+    /// vertices five times as far, which the coarse attempts clamp and the kept one does not.
+    #[test]
+    fn a_step_taken_again_reports_what_its_kept_attempt_did() {
+        let make = || {
+            let mut body =
+                implicit_gas_ball(BodySettings { gravity: Vec3::ZERO, threads: 1, ..BodySettings::default() });
+            body.gas.as_mut().unwrap().v_min.fill(4.1);
+            body
+        };
+        let (mut taken_again, mut once) = (make(), make());
+        let mut retried_with_a_difference = false;
+        for k in 0..3 {
+            for body in [&mut taken_again, &mut once] {
+                if let Scratch::Implicit(s) = &mut body.scratch {
+                    s.test_gain = if k >= 1 { 4.0 } else { 0.0 };
+                }
+            }
+            let start = taken_again.subdivision;
+            let a = taken_again.step().unwrap();
+            // The subdivision its kept attempt used (the next step's may be half of it).
+            let kept = start.max(taken_again.subdivision);
+            once.subdivision = kept;
+            let b = once.step().unwrap();
+            assert!(taken_again.nodes.x == once.nodes.x && taken_again.nodes.v == once.nodes.v, "step {k}");
+            assert_eq!(a.volume_clamped, b.volume_clamped, "step {k}, taken again {start} -> {kept}");
+            retried_with_a_difference |= kept > start && !a.volume_clamped;
+        }
+        assert!(retried_with_a_difference, "no step was taken again after a clamping attempt");
     }
 
     /// A rolled-back implicit step leaves no trace: the warm start and the held contacts go back

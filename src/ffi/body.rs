@@ -28,14 +28,17 @@ pub const SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER: u32 = 1;
 /// and gas as stiff as allowed, with numerical damping. The default. Its one linearised solve
 /// per substep makes energy where a step moves vertices far beyond the linearisation (a light
 /// piece whose springs turn or fold within the step, a shred falling onto the ground), so it
-/// controls its step: a step that ends with more energy than it started with, by more than a
-/// fifth of its kinetic and spring energy (beyond the external work), is taken again from its
-/// start in twice the substeps, up to 16 times `substeps` (fewer where h would fall below 1e-6 s
-/// or the substeps exceed 1000); the following steps keep that subdivision and halve it after 8
-/// steps that needed no more. Such steps cost as much more (`solver_iterations` counts every
-/// attempt). A step is `SOFTSHELL_STATUS_UNSTABLE` (rolled back; raise `substeps`) when even
-/// that fails: a NaN, or the energy made without a source (`energy_drift`) over 20 times what
-/// the body was given and more than doubled, two steps in a row.
+/// controls its step: a step that makes energy without a source (beyond the external work) while
+/// the energy the recent steps made (each step's growth plus 0.9 times the record before it)
+/// exceeds the kinetic and spring energy it started with is taken again from its start in twice
+/// the substeps, up to 16 times `substeps` (fewer where h would fall below 1e-6 s or the
+/// substeps exceed 1000); the following steps keep that subdivision and halve it after 8 steps
+/// that needed no more. Such steps cost as much more (`solver_iterations` counts every attempt;
+/// a plain impact, which makes up to half that energy in one step, is not subdivided). A step is
+/// `SOFTSHELL_STATUS_UNSTABLE` (rolled back; raise `substeps`) when even the finest fails: a
+/// NaN, kinetic energy far beyond what the step had available, or the energy made without a
+/// source (`energy_drift`) over 20 times what the body was given and more than doubled, two
+/// steps in a row.
 pub const SOFTSHELL_INTEGRATOR_IMPLICIT_EULER: u32 = 2;
 /// XPBD: springs as distance constraints with compliance 1/K_s, gas as a volume constraint;
 /// `iterations` Gauss-Seidel sweeps per substep. Its springs are as stiff as K_s only as far as
