@@ -10,7 +10,8 @@
 //! quotes). The zero-gravity run checks the simulated equilibrium against it; on the ground the
 //! ball also carries its weight, which flattens it a little.
 //!
-//! Also measured: the cost of a step that cracks against a plain step, and stability at 1/15 s.
+//! Also measured: the cost of a step that cracks against a plain step, the cost of an engine's
+//! cut (`softshell_body_break_edges`) on the balloon at rest, and stability at 1/15 s.
 //! Run with `cargo bench --bench body_balloon` (add `-- quick` for 200 steps; environment
 //! variables that select rows or change the scene are described where they are read).
 
@@ -350,6 +351,10 @@ fn main() {
             }
         }
     }
+    // BODY_ONLY=cut runs only the interactive cuts.
+    if only.as_deref().is_none_or(|o| o == "cut") {
+        interactive_cuts(&positions, &triangles, &base);
+    }
     if only.as_deref().is_some_and(|o| o != "cracking") {
         return;
     }
@@ -669,4 +674,126 @@ fn shape_trace(body: *mut SoftshellBody) -> String {
         "centre ({:.4}, {:.4}, {:.4}) m, its velocity ({:.4}, {:.4}, {:.4}) m/s, {inward} faces turned inward; ",
         centre.x, centre.y, centre.z, velocity.x, velocity.y, velocity.z
     )
+}
+
+/// An engine's cut on the balloon at rest: the issue's drop (no break limits, so the first cut
+/// also makes the fracture bookkeeping) stepped `CUT_AT` steps, then a slit of `k` edges cut with
+/// `softshell_body_break_edges` and a step; the cut and that step timed against the same step of
+/// a twin that is not cut (the same state to the bit before the cut). A second cut of `k` edges
+/// elsewhere, `CUT_GAP` steps later, is timed the same way against a twin cut once. Each body is
+/// made, stepped and freed one after the other (see [`same_state_cost`]); median of three
+/// samples of each, the order of the twins alternating.
+fn interactive_cuts(positions: &[f32], triangles: &[u32], drop: &SoftshellBodyDef) {
+    const CUT_AT: usize = 300;
+    const CUT_GAP: usize = 5;
+    println!(
+        "\nan interactive cut on the balloon at rest (step {CUT_AT} of the drop, no break limits): a slit of k edges \
+         from the top, then a step; against the same step without the cut (median of 3):"
+    );
+    let n = positions.len() / 3;
+    let mut neighbours = vec![Vec::new(); n];
+    for t in triangles.chunks_exact(3) {
+        for s in 0..3 {
+            let (a, b) = (t[s] as usize, t[(s + 1) % 3] as usize);
+            neighbours[a].push(b as u32);
+            neighbours[b].push(a as u32);
+        }
+    }
+    // A path of k edges walking down from the highest (or lowest) vertex near the plane z = 0,
+    // each step to the unvisited neighbour lowest (highest) with the least |z|.
+    let slit = |x: &[f32], k: usize, downward: bool| -> Vec<u32> {
+        let sign = if downward { 1.0 } else { -1.0 };
+        let key = |v: usize| sign * x[3 * v + 1] + 3.0 * x[3 * v + 2].abs();
+        // The start: the highest (lowest) vertex, |z| counted as height lost.
+        let start_key = |v: usize| -sign * x[3 * v + 1] + x[3 * v + 2].abs();
+        let mut at = (0..n).min_by(|&a, &b| start_key(a).total_cmp(&start_key(b))).expect("a mesh with vertices");
+        let mut visited = vec![at as u32];
+        let mut pairs = Vec::new();
+        for _ in 0..k {
+            let Some(&next) = neighbours[at]
+                .iter()
+                .filter(|v| !visited.contains(v))
+                .min_by(|&&a, &&b| key(a as usize).total_cmp(&key(b as usize)))
+            else {
+                break;
+            };
+            pairs.extend([at as u32, next]);
+            visited.push(next);
+            at = next as usize;
+        }
+        pairs
+    };
+    // (cut ms, step ms, CG it.) of one body stepped CUT_AT steps: with `before`, cut there
+    // (untimed) and stepped CUT_GAP steps more; with `timed`, cut then (from the top, or from
+    // the bottom after a cut `before`); then the step timed.
+    let sample = |k: usize, before: bool, timed: bool| -> Option<(f64, f64, u64)> {
+        let body = new_body(positions, triangles, drop);
+        let mut stats = SoftshellBodyStats::default();
+        let mut steps_ok = |count: usize| {
+            // SAFETY: a live body and writable stats.
+            (0..count).all(|_| unsafe { softshell_body_step(body, &mut stats) } == SoftshellStatus::Ok)
+        };
+        // The seconds a cut took; None if it broke nothing.
+        let cut = |downward: bool| -> Option<f64> {
+            let mut x = vec![0.0f32; 3 * n];
+            let mut len = 0;
+            // SAFETY: a live body; the buffer holds the first n vertices (a cut appends).
+            unsafe { softshell_body_copy_positions(body, x.as_mut_ptr(), x.len(), &mut len) };
+            let pairs = slit(&x, k, downward);
+            let mut broken = 0;
+            let started = Instant::now();
+            // SAFETY: a live body; `pairs` holds pairs of its vertices.
+            let status = unsafe { softshell_body_break_edges(body, pairs.as_ptr(), pairs.len() / 2, &mut broken) };
+            let seconds = started.elapsed().as_secs_f64();
+            (status == SoftshellStatus::Ok && broken > 0).then_some(seconds)
+        };
+        let mut result = None;
+        let ready = steps_ok(CUT_AT) && (!before || (cut(true).is_some() && steps_ok(CUT_GAP)));
+        if ready {
+            if let Some(cut_seconds) = if timed { cut(!before) } else { Some(0.0) } {
+                let started = Instant::now();
+                // SAFETY: a live body and writable stats.
+                let status = unsafe { softshell_body_step(body, &mut stats) };
+                let seconds = started.elapsed().as_secs_f64();
+                result = (status == SoftshellStatus::Ok).then_some((cut_seconds, seconds, stats.solver_iterations));
+            }
+        }
+        // SAFETY: made above, freed once.
+        unsafe { softshell_body_free(body) };
+        result
+    };
+    for second in [false, true] {
+        for k in [1usize, 10, 100] {
+            let mut ratios = Vec::new();
+            for r in 0..3 {
+                // The twin: the same body without this cut (with the first when timing the second).
+                let (with, without) = if r % 2 == 0 {
+                    (sample(k, second, true), sample(k, second, false))
+                } else {
+                    let without = sample(k, second, false);
+                    (sample(k, second, true), without)
+                };
+                if let (Some(w), Some(o)) = (with, without) {
+                    ratios.push(((w.0 + w.1) / o.1, w, o));
+                }
+            }
+            if ratios.is_empty() {
+                println!("  k = {k}: not measured (a step or the cut failed)");
+                continue;
+            }
+            ratios.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let (ratio, w, o) = ratios[ratios.len() / 2];
+            println!(
+                "  {} cut, k = {k:>3}: the cut {:.2} ms + the step after it {:.2} ms ({} CG it.); the same step \
+                 without the cut {:.2} ms ({} CG it.): {:.2} x",
+                if second { "second" } else { "first" },
+                w.0 * 1e3,
+                w.1 * 1e3,
+                w.2,
+                o.1 * 1e3,
+                o.2,
+                ratio
+            );
+        }
+    }
 }
