@@ -50,7 +50,9 @@ impl FanRings {
         // The rings one after another (a vertex without one: none), vertex v's from
         // `ring_start[v]` to `ring_start[v + 1]`.
         let mut ring_start = Vec::with_capacity(n + 1);
-        let mut entries: Vec<u32> = Vec::new();
+        // (Room for the rings of a closed surface, six corners a vertex on average: grown by
+        // doubling, these buffers were copied again and again.)
+        let mut entries: Vec<u32> = Vec::with_capacity(6 * n + 64);
         let mut corners = Vec::new();
         ring_start.push(0u32);
         for v in 0..n {
@@ -63,7 +65,7 @@ impl FanRings {
         let ring = |v: usize| &entries[ring_start[v] as usize..ring_start[v + 1] as usize];
         let slices = n.div_ceil(SLICE);
         let mut offsets = Vec::with_capacity(slices + 1);
-        let mut groups = Vec::new();
+        let mut groups = Vec::with_capacity(8 * slices);
         let mut whole = Vec::with_capacity(slices);
         for s in 0..slices {
             offsets.push(groups.len() as u32);

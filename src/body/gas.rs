@@ -778,17 +778,34 @@ impl Gas {
 
     /// The corners at each vertex (CSR, faces ascending).
     fn build_corners(&mut self, triangles: &[[u32; 3]], n: usize) {
-        let (offsets, corners) = crate::mesh::vertex_incidence(n, triangles, |face, c| 3 * face as u32 + c as u32);
-        let face_fragment = &self.face_fragment;
+        // Each vertex's corners in face order: a count, then one pass over the faces writing
+        // each corner in its place (a list of corner numbers first, then a pass reading the
+        // faces again for each, took 1.0 ms against 0.65 ms on a 16k-vertex sphere). A topology
+        // change makes these again for the whole mesh in its fracture phase.
+        let mut offsets = std::mem::take(&mut self.corner_offsets);
+        offsets.clear();
+        offsets.resize(n + 1, 0);
+        for t in triangles {
+            for &v in t {
+                offsets[v as usize + 1] += 1;
+            }
+        }
+        for v in 0..n {
+            offsets[v + 1] += offsets[v];
+        }
+        let mut cursor = offsets[..n].to_vec();
+        let mut corners = std::mem::take(&mut self.corners);
+        corners.clear();
+        corners.resize(offsets[n] as usize, Corner { next: 0, prev: 0, fragment: 0 });
+        for (t, &fragment) in triangles.iter().zip(&self.face_fragment) {
+            for c in 0..3 {
+                let slot = &mut cursor[t[c] as usize];
+                corners[*slot as usize] = Corner { next: t[(c + 1) % 3], prev: t[(c + 2) % 3], fragment };
+                *slot += 1;
+            }
+        }
         self.corner_offsets = offsets;
-        self.corners = corners
-            .iter()
-            .map(|&corner| {
-                let (face, c) = ((corner / 3) as usize, (corner % 3) as usize);
-                let t = triangles[face];
-                Corner { next: t[(c + 1) % 3], prev: t[(c + 2) % 3], fragment: face_fragment[face] }
-            })
-            .collect();
+        self.corners = corners;
         // The rings first: a fan that walks as one ring is closed, and only the others (open
         // fans and two cones meeting at a vertex, a few on most meshes) are compared sorted.
         // (Every list is reused from vertex to vertex: see `FanRings::new`.)

@@ -45,6 +45,7 @@ use super::slice_vertices::{free_slice_start_avx2, slice_vertices_avx2};
 use super::spring_sums::slice_spring_sums_avx2;
 use super::spring_sums::{SliceSums, row_spring_sums};
 use super::spring_terms::{SpringInput, SpringTerms, spring_terms_range};
+use super::springs::Springs;
 use super::symmetric_block::SymmetricBlock;
 use crate::parallel::{SharedSlice, Team, TeamSizer, WorkerPool};
 
@@ -315,11 +316,18 @@ impl ImplicitScratch {
     /// The per-vertex buffers every substep writes and the coupling layout, sized for `n`
     /// vertices and the springs of `model`.
     fn size_buffers(&mut self, model: &Model, n: usize) {
+        self.lay_out(model.springs, n);
+    }
+
+    /// [`ImplicitScratch::size_buffers`] for `n` vertices and `springs`: a topology change calls
+    /// it, so that the step that changed the topology makes what the next would (nothing, if
+    /// it is made).
+    pub fn lay_out(&mut self, springs: &Springs, n: usize) {
         for buffer in [&mut self.rhs, &mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
             buffer.resize(n, Vec3A::ZERO);
         }
         self.inv_diag.resize(n, SymmetricBlock::default());
-        self.couplings.layout_springs(model.springs);
+        self.couplings.layout_springs(springs);
     }
 
     pub fn memory_bytes(&self) -> usize {
