@@ -37,6 +37,7 @@ use std::ops::Range;
 use glam::{Vec3, Vec3A, Vec4};
 
 use super::gas::MIXED_FRAGMENTS;
+use super::headroom::with_room;
 use super::springs::Springs;
 
 /// Rows per slice (the lanes of a 256-bit register of f32).
@@ -259,6 +260,13 @@ impl CouplingSlices {
                 }
             }
         }
+    }
+
+    /// Room for a fraction `headroom` more slices and groups than laid out (see `headroom`).
+    pub fn reserve_headroom(&mut self, headroom: f64) {
+        with_room(&mut self.offsets, headroom);
+        with_room(&mut self.groups, headroom);
+        with_room(&mut self.springs, headroom);
     }
 
     pub fn memory_bytes(&self) -> usize {

@@ -20,6 +20,7 @@ use glam::{Vec3, Vec3A};
 
 use super::coupling_slices::SLICE;
 use super::gas::point;
+use super::headroom::{reserve_for, with_room};
 
 /// The rings of a mesh's closed fans by slices of eight vertices (see the module doc).
 #[derive(Clone, Debug, Default)]
@@ -33,26 +34,45 @@ pub(crate) struct FanRings {
     /// Per slice, whether all eight lanes are rings and every entry is below the last point
     /// (so each can be loaded 16 bytes at a time).
     whole: Vec<bool>,
+    /// The buffers [`FanRings::rebuild`] walks the rings into, kept for the next rebuild.
+    spare_starts: Vec<u32>,
+    spare_entries: Vec<u32>,
 }
 
 impl FanRings {
-    /// The rings of `n` vertices; `fan(v, out)` puts into `out` (empty) the (next, previous)
-    /// corners of the faces around v (in their winding) and returns whether to walk them: a fan
-    /// that walks as one single ring gets it (every such fan is closed: the walk visits each
-    /// corner once); an open fan or one that is closed but no single ring (two cones meeting at
-    /// v) gets none.
+    /// The rings of `n` vertices (tests; see [`FanRings::rebuild`]).
+    #[cfg(test)]
+    pub fn new(n: usize, fan: impl FnMut(usize, &mut Vec<(u32, u32)>) -> bool) -> Self {
+        let mut rings = Self::default();
+        rings.rebuild(n, fan);
+        rings
+    }
+
+    /// Makes the rings of `n` vertices in this one's buffers; `fan(v, out)` puts into `out`
+    /// (empty) the (next, previous) corners of the faces around v (in their winding) and
+    /// returns whether to walk them: a fan that walks as one single ring gets it (every such
+    /// fan is closed: the walk visits each corner once); an open fan or one that is closed but
+    /// no single ring (two cones meeting at v) gets none.
     ///
     /// The corners and the rings go into buffers made once for all vertices: with a few vectors
     /// allocated per vertex, this and the fans' closure test (`Gas`) took about 4 ms on the
     /// issue-5 balloon (10,242 vertices), in its first step and in the first step after every
-    /// topology change.
-    pub fn new(n: usize, mut fan: impl FnMut(usize, &mut Vec<(u32, u32)>) -> bool) -> Self {
+    /// topology change. A topology change makes the rings again in the buffers of the rings
+    /// before it (`Gas::after_change`), and keeps the buffers it walks the rings into where it
+    /// found them with room ([`FanRings::reserve_headroom`], for a body that may crack): in new
+    /// buffers each page faults in on first use.
+    pub fn rebuild(&mut self, n: usize, mut fan: impl FnMut(usize, &mut Vec<(u32, u32)>) -> bool) {
+        let keep_spares = self.spare_entries.capacity() > 0;
         // The rings one after another (a vertex without one: none), vertex v's from
         // `ring_start[v]` to `ring_start[v + 1]`.
-        let mut ring_start = Vec::with_capacity(n + 1);
+        let mut ring_start = std::mem::take(&mut self.spare_starts);
+        ring_start.clear();
+        ring_start.reserve(n + 1);
         // (Room for the rings of a closed surface, six corners a vertex on average: grown by
         // doubling, these buffers were copied again and again.)
-        let mut entries: Vec<u32> = Vec::with_capacity(6 * n + 64);
+        let mut entries = std::mem::take(&mut self.spare_entries);
+        entries.clear();
+        entries.reserve(6 * n + 64);
         let mut corners = Vec::new();
         ring_start.push(0u32);
         for v in 0..n {
@@ -64,9 +84,13 @@ impl FanRings {
         }
         let ring = |v: usize| &entries[ring_start[v] as usize..ring_start[v + 1] as usize];
         let slices = n.div_ceil(SLICE);
-        let mut offsets = Vec::with_capacity(slices + 1);
-        let mut groups = Vec::with_capacity(8 * slices);
-        let mut whole = Vec::with_capacity(slices);
+        let (offsets, groups, whole) = (&mut self.offsets, &mut self.groups, &mut self.whole);
+        offsets.clear();
+        offsets.reserve(slices + 1);
+        groups.clear();
+        groups.reserve(8 * slices);
+        whole.clear();
+        whole.reserve(slices);
         for s in 0..slices {
             offsets.push(groups.len() as u32);
             let lanes = s * SLICE..((s + 1) * SLICE).min(n);
@@ -88,8 +112,22 @@ impl FanRings {
             whole.push(lanes.len() == SLICE && lanes.clone().all(|v| !ring(v).is_empty()) && below_last);
         }
         offsets.push(groups.len() as u32);
-        let length = (0..n).map(|v| ring(v).len() as u32).collect();
-        Self { offsets, groups, length, whole }
+        self.length.clear();
+        self.length.extend((0..n).map(|v| ring(v).len() as u32));
+        if keep_spares {
+            (self.spare_starts, self.spare_entries) = (ring_start, entries);
+        }
+    }
+
+    /// Room for a fraction `headroom` more vertices and ring entries (see `headroom`).
+    pub fn reserve_headroom(&mut self, headroom: f64) {
+        let n = self.length.len();
+        with_room(&mut self.offsets, headroom);
+        with_room(&mut self.groups, headroom);
+        with_room(&mut self.length, headroom);
+        with_room(&mut self.whole, headroom);
+        reserve_for(&mut self.spare_starts, n + 1, headroom);
+        reserve_for(&mut self.spare_entries, 6 * n + 64, headroom);
     }
 
     /// Whether vertex v's fan is one closed ring.
@@ -146,6 +184,7 @@ impl FanRings {
             + self.groups.capacity() * std::mem::size_of::<[u32; SLICE]>()
             + self.length.capacity() * 4
             + self.whole.capacity()
+            + (self.spare_starts.capacity() + self.spare_entries.capacity()) * 4
     }
 }
 

@@ -10,6 +10,7 @@ use glam::{DVec3, Vec3, Vec3A};
 
 use super::coupling_slices::SLICE;
 use super::fan_rings::FanRings;
+use super::headroom::with_room;
 use crate::parallel::WorkerPool;
 
 /// A boundary loop of a fragment, closed by a fan from the mean of its vertices.
@@ -416,7 +417,7 @@ impl Gas {
     /// the rim of every piece: about 2.8 ms of every cracking step, the longer half of the
     /// rebuild (the springs, built at the same time, about 1.4 ms).
     pub fn after_change(
-        old: &Gas,
+        mut old: Gas,
         x: &[Vec3],
         triangles: &[[u32; 3]],
         face_fragment: &[u32],
@@ -459,14 +460,14 @@ impl Gas {
                 Some(without),
             )
         };
-        gas.inherit(old, x, triangles);
+        gas.inherit(&old, x, triangles);
         if !keep_every {
             gas.keep_fragments_with_gas(triangles);
         }
         #[cfg(test)]
         if CHECK_AFTER_CHANGE.load(std::sync::atomic::Ordering::Relaxed) {
             let mut made_late = Gas::new(vertex_count, triangles, face_fragment, fragment_count, boundary_loops);
-            made_late.inherit(old, x, triangles);
+            made_late.inherit(&old, x, triangles);
             if !keep_every {
                 made_late.keep_fragments_with_gas(triangles);
             }
@@ -475,6 +476,7 @@ impl Gas {
                 GATHERED_EARLY.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             }
         }
+        gas.adopt_corner_buffers(&mut old);
         gas
     }
 
@@ -776,6 +778,29 @@ impl Gas {
         self.finish(x);
     }
 
+    /// Room for a fraction `headroom` more vertices and corners in the corner lists and rings
+    /// that a topology change makes again (see `headroom`), for a body that may crack.
+    pub fn reserve_headroom(&mut self, headroom: f64) {
+        with_room(&mut self.corner_offsets, headroom);
+        with_room(&mut self.corners, headroom);
+        with_room(&mut self.closed_fan, headroom);
+        with_room(&mut self.slice_fragment, headroom);
+        self.rings.reserve_headroom(headroom);
+    }
+
+    /// Takes the corner lists and rings of `old` (the gas before a change) to make this gas's
+    /// own in ([`Gas::prepare_corners`] then writes them anew): in new buffers each of their
+    /// pages faulted in on first use (about 650 page faults, 0.6-1 ms, of the issue-5 balloon's
+    /// first cracking step).
+    fn adopt_corner_buffers(&mut self, old: &mut Gas) {
+        self.corner_offsets = std::mem::take(&mut old.corner_offsets);
+        self.corner_offsets.clear();
+        self.corners = std::mem::take(&mut old.corners);
+        self.closed_fan = std::mem::take(&mut old.closed_fan);
+        self.slice_fragment = std::mem::take(&mut old.slice_fragment);
+        self.rings = std::mem::take(&mut old.rings);
+    }
+
     /// The corners at each vertex (CSR, faces ascending).
     fn build_corners(&mut self, triangles: &[[u32; 3]], n: usize) {
         // Each vertex's corners in face order: a count, then one pass over the faces writing
@@ -811,39 +836,41 @@ impl Gas {
         // (Every list is reused from vertex to vertex: see `FanRings::new`.)
         let (offsets, corners) = (&self.corner_offsets, &self.corners);
         let fan = |v: usize| &corners[offsets[v] as usize..offsets[v + 1] as usize];
-        self.rings = FanRings::new(n, |v, out| {
+        self.rings.rebuild(n, |v, out| {
             out.extend(fan(v).iter().map(|c| (c.next, c.prev)));
             !out.is_empty()
         });
         let (mut next, mut prev) = (Vec::new(), Vec::new());
-        self.closed_fan = (0..n)
-            .map(|v| {
-                if self.rings.is_ring(v) {
-                    return true;
-                }
-                next.clear();
-                prev.clear();
-                next.extend(fan(v).iter().map(|c| c.next));
-                prev.extend(fan(v).iter().map(|c| c.prev));
-                next.sort_unstable();
-                prev.sort_unstable();
-                !fan(v).is_empty() && next == prev
-            })
-            .collect();
+        let mut closed_fan = std::mem::take(&mut self.closed_fan);
+        closed_fan.clear();
+        closed_fan.extend((0..n).map(|v| {
+            if self.rings.is_ring(v) {
+                return true;
+            }
+            next.clear();
+            prev.clear();
+            next.extend(fan(v).iter().map(|c| c.next));
+            prev.extend(fan(v).iter().map(|c| c.prev));
+            next.sort_unstable();
+            prev.sort_unstable();
+            !fan(v).is_empty() && next == prev
+        }));
+        self.closed_fan = closed_fan;
         // The fragment of a vertex's fan is that of its first corner (`fan_has_gas`).
         let first_fragment = |v: usize| {
             let first = offsets[v] as usize;
             (first < offsets[v + 1] as usize).then(|| corners[first].fragment)
         };
-        self.slice_fragment = (0..n / SLICE)
-            .map(|s| {
-                let f = first_fragment(s * SLICE);
-                match f {
-                    Some(f) if (s * SLICE..(s + 1) * SLICE).all(|v| first_fragment(v) == Some(f)) => f,
-                    _ => u32::MAX,
-                }
-            })
-            .collect();
+        let mut slice_fragment = std::mem::take(&mut self.slice_fragment);
+        slice_fragment.clear();
+        slice_fragment.extend((0..n / SLICE).map(|s| {
+            let f = first_fragment(s * SLICE);
+            match f {
+                Some(f) if (s * SLICE..(s + 1) * SLICE).all(|v| first_fragment(v) == Some(f)) => f,
+                _ => u32::MAX,
+            }
+        }));
+        self.slice_fragment = slice_fragment;
     }
 
     /// Adds the caps to the face sums of 6 V per fragment (left in `volume` by the caller: a

@@ -35,6 +35,7 @@ use super::coupling_slices::{
 use super::energy::{self, SpringEnergyLanes};
 use super::forces::{Model, add_gas_forces_parallel, external_forces};
 use super::gas::{self, Gas};
+use super::headroom::reserve_for;
 use super::obstacles::{Obstacle, resolve, touching};
 #[cfg(target_arch = "x86_64")]
 use super::slice_update::{self, update_slice_avx2};
@@ -311,6 +312,28 @@ impl ImplicitScratch {
             self.coarse = CoarseSpace::new(model, x, h, threads);
             self.coarse_h = h;
         }
+    }
+
+    /// Room for a fraction `headroom` more vertices and springs than `n` and `springs` in the
+    /// buffers a topology change grows (see `headroom`), for a body that may crack; with
+    /// `obstacles`, in the contact buffers too. After [`ImplicitScratch::prepare`].
+    pub fn reserve_headroom(&mut self, n: usize, springs: usize, headroom: f64, obstacles: bool) {
+        for buffer in
+            [&mut self.rhs, &mut self.dv, &mut self.saved_dv, &mut self.r, &mut self.z, &mut self.p, &mut self.ap]
+        {
+            reserve_for(buffer, n, headroom);
+        }
+        reserve_for(&mut self.inv_diag, n, headroom);
+        reserve_for(&mut self.gradient, n, headroom);
+        reserve_for(&mut self.spring_terms, springs, headroom);
+        if obstacles {
+            reserve_for(&mut self.contact_slot, n, headroom);
+            reserve_for(&mut self.contact_normal, n, headroom);
+            reserve_for(&mut self.contact_reaction, n, headroom);
+            reserve_for(&mut self.contact_held, n, headroom);
+            reserve_for(&mut self.saved_held, n, headroom);
+        }
+        self.couplings.reserve_headroom(headroom);
     }
 
     /// The per-vertex buffers every substep writes and the coupling layout, sized for `n`

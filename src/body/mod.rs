@@ -24,6 +24,7 @@ mod explicit;
 mod fan_rings;
 mod forces;
 mod gas;
+mod headroom;
 mod implicit;
 mod obstacles;
 mod settings;

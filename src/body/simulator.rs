@@ -12,6 +12,7 @@ use super::energy;
 use super::explicit::{self, ExplicitScratch};
 use super::forces::{Model, add_gas_forces, add_spring_forces};
 use super::gas::Gas;
+use super::headroom::reserve_for;
 use super::implicit::{self, ImplicitScratch};
 use super::obstacles::{Obstacle, project, resolve};
 use super::settings::{BodySettings, Integrator, MAX_SUBSTEPS, MIN_TIME_STEP};
@@ -474,6 +475,17 @@ impl Body {
             let h = body.settings.time_step / body.settings.substeps.max(1) as f32;
             let x = &body.nodes.x;
             body.pool.install(|| s.prepare(&model, x, h, body.pool.threads()));
+            if body.settings.fracture_enabled() {
+                s.reserve_headroom(n, body.springs.len(), FRACTURE_HEADROOM, !body.obstacles.is_empty());
+            }
+        }
+        if body.settings.fracture_enabled() {
+            // The state a step rolls back to (sized by every step).
+            reserve_for(&mut body.saved_x, n, FRACTURE_HEADROOM);
+            reserve_for(&mut body.saved_v, n, FRACTURE_HEADROOM);
+            if let Some(gas) = body.gas.as_mut() {
+                gas.reserve_headroom(FRACTURE_HEADROOM);
+            }
         }
         Ok(body)
     }
@@ -1604,7 +1616,7 @@ impl Body {
                     let t = Instant::now();
                     let gas = old_gas.map(|old| {
                         let mut gas = Gas::after_change(
-                            &old,
+                            old,
                             &nodes.x,
                             triangles,
                             face_fragment,

@@ -3,6 +3,8 @@
 
 use glam::Vec3;
 
+use super::headroom::{reserve_for, with_room};
+
 /// The springs of a body: end vertices and rest lengths, one entry per unbroken mesh edge.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Springs {
@@ -81,21 +83,11 @@ impl Springs {
     /// (`surface::rebuild_springs`), and within that room moves none of them (a reallocation
     /// copies the old contents, and new memory faults its pages in one by one on first use).
     pub fn reserve_headroom(&mut self, headroom: f64) {
-        fn with_room<T: Copy + Default>(v: &mut Vec<T>, headroom: f64) {
-            let room = v.len() + (v.len() as f64 * headroom).ceil() as usize;
-            if v.capacity() >= room {
-                return;
-            }
-            let len = v.len();
-            let mut roomy = Vec::with_capacity(room);
-            roomy.extend_from_slice(v);
-            // Written once past the end (`resize`; `vec![0; n]` would not touch fresh pages).
-            roomy.resize(room, T::default());
-            roomy.truncate(len);
-            *v = roomy;
-        }
+        let count = self.ends.len();
         with_room(&mut self.ends, headroom);
         with_room(&mut self.rest, headroom);
+        // (Empty until the first change: it is made with the fracture's rebuilds.)
+        reserve_for(&mut self.one_face, count, headroom);
         if self.adjacency_id != 0 {
             with_room(&mut self.adjacency, headroom);
             // The offsets take one more entry while they are built.
