@@ -502,3 +502,26 @@ fn pinning_a_moving_vertex_is_not_taken_for_energy_drift() {
         "drift {pinned} J with the pin against {free} J without; the pin took {taken} J"
     );
 }
+
+/// A mesh with a vertex no triangle uses (common in OBJ files: the body gives it no mass and
+/// holds it) made `softshell_body_new` panic with the default def (implicit Euler): its coarse
+/// level divided the vertex's zero mass by its zero diagonal, and the NaN drop tolerance failed
+/// an assert, so the call returned INTERNAL ("this is a bug in softshell").
+#[test]
+fn a_mesh_with_an_unused_vertex_makes_a_body_with_the_default_def() {
+    let (mut p, t) = icosphere(1, 0.5);
+    p.extend([5.0, 5.0, 5.0]);
+    for gas in [0.0f32, 5.0] {
+        let mut def = softshell_body_def_default();
+        def.gas_amount = gas;
+        let body = try_body(&p, &t, &def).unwrap_or_else(|(s, m)| panic!("gas {gas}: {s:?}: {m}"));
+        for _ in 0..10 {
+            let stats = step(&body);
+            assert!(stats.kinetic_energy.is_finite() && stats.energy_drift.is_finite());
+        }
+        let s = snapshot(&body);
+        assert!(s.positions.iter().chain(&s.velocities).all(|v| v.is_finite()));
+        let unused = s.vertex_count() - 1;
+        assert_eq!(s.position(unused), [5.0, 5.0, 5.0], "the unused vertex has no mass and stays");
+    }
+}

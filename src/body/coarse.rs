@@ -378,6 +378,14 @@ impl CoarseSpace {
         for (a, d) in diagonal.iter_mut().enumerate() {
             let edges: f64 = graph.weights[graph.offsets[a] as usize..graph.offsets[a + 1] as usize].iter().sum();
             *d = (mass[a] + w * edges) / COARSE_WEIGHT;
+            // An aggregate of vertices no triangle uses (a mesh's unused vertices: no mass, no
+            // springs) has an empty row: 0/0 made its drop tolerance NaN (a panic in
+            // `softshell_body_new`, found by review). A unit diagonal keeps the matrix
+            // factorable; its correction is never applied (those vertices are held, inverse
+            // mass 0).
+            if *d <= 0.0 {
+                *d = 1.0;
+            }
             center[a] /= members[a].max(1) as f32;
         }
         let values: Vec<f64> = graph.weights.iter().map(|&e| -w * e / COARSE_WEIGHT).collect();

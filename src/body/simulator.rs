@@ -814,13 +814,13 @@ impl Body {
     }
 
     /// The largest stable time step (s) of the explicit integrators, from the bounds `ω_max²` of
-    /// the springs' stiffness and `γ_max` of their damping per unit mass
-    /// ([`energy::spring_rate_bound`]), for one mode `ẍ = -ω² x - γ ẋ` (Jury's conditions on the
-    /// step's 2x2 matrix; the bounds belong to the same mode, the ratio `γ/ω² = K_d/K_s` is that of
-    /// every mode of the springs):
+    /// the springs' and the gas's stiffness and `γ_max` of the springs' damping per unit mass
+    /// ([`energy::spring_rate_bound`], [`Gas::stiffness_rate_bound`]), for one mode
+    /// `ẍ = -ω² x - γ ẋ` (Jury's conditions on the step's 2x2 matrix; the bounds belong to the
+    /// same mode, the ratio `γ/ω²` is `K_d/K_s` in every mode of the springs without gas):
     /// - symplectic Euler (and the implicit integrators' messages): `h² ω² + 2 h γ < 4`, so
     ///   `h < 4 / (γ + √(γ² + 4 ω²))` (`2/ω` without damping, `2/γ` without stiffness);
-    /// - explicit Euler: `h ω² < γ` and `h (2γ - h ω²) < 4`, so `h < K_d/K_s` and, where
+    /// - explicit Euler: `h ω² < γ` and `h (2γ - h ω²) < 4`, so `h < γ/ω²` and, where
     ///   damping dominates (`γ² > 4 ω²`), `h < 4 / (γ + √(γ² - 4 ω²))`; 0 without damping (its
     ///   springs' modes then grow at any step).
     ///
@@ -831,7 +831,14 @@ impl Body {
     pub fn stable_time_step(&self) -> f64 {
         let rate = energy::spring_rate_bound(&self.springs, &self.nodes.inv_mass);
         let (ks, kd) = (self.settings.spring_stiffness as f64, self.settings.spring_damping as f64);
-        let (omega2, gamma) = (ks * rate, kd * rate);
+        // The gas's pressure is as stiff as the springs or far stiffer (nRT 1e9 J against K_s
+        // 1000 N/m: ω² 1e11 against 2e6 1/s²): its bound adds to theirs (Gershgorin bounds of
+        // the sum of both stiffness matrices; see `Gas::stiffness_rate_bound`).
+        let gas = self
+            .gas
+            .as_ref()
+            .map_or(0.0, |g| g.stiffness_rate_bound(&self.nodes.x, &self.triangles, &self.nodes.inv_mass));
+        let (omega2, gamma) = (ks * rate + gas, kd * rate);
         if self.settings.integrator == Integrator::ExplicitEuler && omega2 > 0.0 {
             if gamma <= 0.0 {
                 return 0.0;
@@ -841,7 +848,8 @@ impl Body {
             } else {
                 f64::INFINITY
             };
-            return (kd / ks).min(damped);
+            // `h ω² < γ` (K_d/K_s without gas).
+            return (gamma / omega2).min(damped);
         }
         let bound = gamma + (gamma * gamma + 4.0 * omega2).sqrt();
         if bound > 0.0 { 4.0 / bound } else { f64::INFINITY }
@@ -910,11 +918,11 @@ impl Body {
             )
         } else if h_max.is_finite() {
             let from = if self.settings.integrator == Integrator::ExplicitEuler {
-                "explicit Euler needs h below K_d/K_s, and below 4/(gamma + sqrt(gamma^2 - 4 omega^2)) where damping \
+                "explicit Euler needs h below gamma/omega^2 (K_d/K_s without gas), and below 4/(gamma + sqrt(gamma^2 - 4 omega^2)) where damping \
                  dominates; modes the springs do not damp (the gas, sideways tension) grow at any h"
             } else {
-                "4/(gamma + sqrt(gamma^2 + 4 omega^2)) with omega^2 and gamma bounds of the springs' stiffness and \
-                 damping per unit mass"
+                "4/(gamma + sqrt(gamma^2 + 4 omega^2)) with omega^2 and gamma bounds of the springs' and the gas's \
+                 stiffness and the springs' damping per unit mass"
             };
             if h < h_max {
                 // Under the springs' limit already: what grew is a mode they do not damp.
@@ -1073,6 +1081,13 @@ impl Body {
                     diverged = Some(format!("vertex {i} reached a NaN or infinite position or velocity"));
                     break;
                 }
+            }
+            // The wind's work enters the energy reference of every later step: a NaN there
+            // (a force that overflowed on faces stretched far beyond their size) made each
+            // later drift NaN, so no drift test could fail again, and reached the caller's stats
+            // with OK (found by review).
+            if diverged.is_none() && !work.is_finite() {
+                diverged = Some(format!("the work of the wind became {work} (its force overflowed)"));
             }
             if diverged.is_none() {
                 // The implicit integrator measured the end state already (its spring extensions,
@@ -1300,7 +1315,8 @@ impl Body {
             self.wind_force
                 .iter()
                 .zip(self.nodes.x.iter().zip(&self.wind_start))
-                .map(|(f, (x1, x0))| f.dot(*x1 - *x0) as f64)
+                // In f64: a large force over a long way overflowed the f32 product.
+                .map(|(f, (x1, x0))| f.as_dvec3().dot((*x1 - *x0).as_dvec3()))
                 .sum()
         } else {
             0.0
