@@ -34,9 +34,15 @@ pub(crate) struct FanRings {
     /// Per slice, whether all eight lanes are rings and every entry is below the last point
     /// (so each can be loaded 16 bytes at a time).
     whole: Vec<bool>,
-    /// The buffers [`FanRings::rebuild`] walks the rings into, kept for the next rebuild.
+    /// The buffers [`FanRings::rebuild_keeping`] walks the rings into and makes them in (the
+    /// rings before it), kept for the next rebuild by a body that may crack.
     spare_starts: Vec<u32>,
     spare_entries: Vec<u32>,
+    spare_kept: Vec<bool>,
+    spare_offsets: Vec<u32>,
+    spare_groups: Vec<[u32; SLICE]>,
+    spare_length: Vec<u32>,
+    spare_whole: Vec<bool>,
 }
 
 impl FanRings {
@@ -57,13 +63,39 @@ impl FanRings {
     /// The corners and the rings go into buffers made once for all vertices: with a few vectors
     /// allocated per vertex, this and the fans' closure test (`Gas`) took about 4 ms on the
     /// issue-5 balloon (10,242 vertices), in its first step and in the first step after every
-    /// topology change. A topology change makes the rings again in the buffers of the rings
-    /// before it (`Gas::after_change`), and keeps the buffers it walks the rings into where it
-    /// found them with room ([`FanRings::reserve_headroom`], for a body that may crack): in new
-    /// buffers each page faults in on first use.
-    pub fn rebuild(&mut self, n: usize, mut fan: impl FnMut(usize, &mut Vec<(u32, u32)>) -> bool) {
+    /// topology change.
+    pub fn rebuild(&mut self, n: usize, fan: impl FnMut(usize, &mut Vec<(u32, u32)>) -> bool) {
+        self.rebuild_keeping(n, fan, |_| false);
+    }
+
+    /// [`FanRings::rebuild`] after a topology change, where these rings are those of the mesh
+    /// before it and `same(v)` tells that vertex v's fan is what it was then (the same faces
+    /// with the same corners): a slice of eight such vertices keeps its groups, copied, and only
+    /// the others are walked and laid out again, to the same rings as a full rebuild. A change
+    /// touches a few slices of the many (the issue-5 balloon's first crack: 301 springs of
+    /// 30,720), and the full rebuild, about 0.55 ms, was the longest part of its rebuilds.
+    ///
+    /// The rings are made in spare buffers and the rings before become the next change's
+    /// spares, where the spares had room ([`FanRings::reserve_headroom`], a body that may
+    /// crack): in new buffers each page faults in on first use.
+    pub fn rebuild_keeping(
+        &mut self,
+        n: usize,
+        mut fan: impl FnMut(usize, &mut Vec<(u32, u32)>) -> bool,
+        same: impl Fn(usize) -> bool,
+    ) {
         let keep_spares = self.spare_entries.capacity() > 0;
-        // The rings one after another (a vertex without one: none), vertex v's from
+        let old = (
+            std::mem::take(&mut self.offsets),
+            std::mem::take(&mut self.groups),
+            std::mem::take(&mut self.length),
+            std::mem::take(&mut self.whole),
+        );
+        let (old_offsets, old_groups, old_length) = (&old.0, &old.1, &old.2);
+        let old_n = old_length.len();
+        // A slice kept: whole before and now, and every lane's fan the same.
+        let kept = |s: usize| (s + 1) * SLICE <= old_n.min(n) && (s * SLICE..(s + 1) * SLICE).all(&same);
+        // The rings walked (a vertex of a kept slice or without one: none), vertex v's from
         // `ring_start[v]` to `ring_start[v + 1]`.
         let mut ring_start = std::mem::take(&mut self.spare_starts);
         ring_start.clear();
@@ -75,59 +107,87 @@ impl FanRings {
         entries.reserve(6 * n + 64);
         let mut corners = Vec::new();
         ring_start.push(0u32);
+        let slices = n.div_ceil(SLICE);
+        let mut kept_slices = std::mem::take(&mut self.spare_kept);
+        kept_slices.clear();
+        kept_slices.extend((0..slices).map(kept));
         for v in 0..n {
             corners.clear();
-            if fan(v, &mut corners) {
+            if !kept_slices[v / SLICE] && fan(v, &mut corners) {
                 walk_into(&corners, &mut entries);
             }
             ring_start.push(entries.len() as u32);
         }
         let ring = |v: usize| &entries[ring_start[v] as usize..ring_start[v + 1] as usize];
-        let slices = n.div_ceil(SLICE);
-        let (offsets, groups, whole) = (&mut self.offsets, &mut self.groups, &mut self.whole);
+        let mut offsets = std::mem::take(&mut self.spare_offsets);
+        let mut groups = std::mem::take(&mut self.spare_groups);
+        let mut length = std::mem::take(&mut self.spare_length);
+        let mut whole = std::mem::take(&mut self.spare_whole);
         offsets.clear();
         offsets.reserve(slices + 1);
         groups.clear();
         groups.reserve(8 * slices);
         whole.clear();
         whole.reserve(slices);
+        length.clear();
+        length.reserve(n);
         for s in 0..slices {
             offsets.push(groups.len() as u32);
             let lanes = s * SLICE..((s + 1) * SLICE).min(n);
-            let longest = lanes.clone().map(|v| ring(v).len()).max().unwrap_or(0);
             let first = groups.len();
-            // The closing entry after the longest ring.
-            groups.resize(first + longest + 1, [0; SLICE]);
-            for (lane, v) in lanes.clone().enumerate() {
-                let ring = ring(v);
-                for (t, group) in groups[first..].iter_mut().enumerate() {
-                    group[lane] = match t {
-                        t if t < ring.len() => ring[t],
-                        t if t == ring.len() && !ring.is_empty() => ring[0],
-                        _ => v as u32,
-                    };
+            if kept_slices[s] {
+                groups.extend_from_slice(&old_groups[old_offsets[s] as usize..old_offsets[s + 1] as usize]);
+                length.extend_from_slice(&old_length[lanes.clone()]);
+            } else {
+                let longest = lanes.clone().map(|v| ring(v).len()).max().unwrap_or(0);
+                // The closing entry after the longest ring.
+                groups.resize(first + longest + 1, [0; SLICE]);
+                for (lane, v) in lanes.clone().enumerate() {
+                    let ring = ring(v);
+                    for (t, group) in groups[first..].iter_mut().enumerate() {
+                        group[lane] = match t {
+                            t if t < ring.len() => ring[t],
+                            t if t == ring.len() && !ring.is_empty() => ring[0],
+                            _ => v as u32,
+                        };
+                    }
                 }
+                length.extend(lanes.clone().map(|v| ring(v).len() as u32));
             }
+            // (Measured again for a kept slice too: `n` may have grown past its entries.)
             let below_last = groups[first..].iter().flatten().all(|&i| (i as usize) + 1 < n);
-            whole.push(lanes.len() == SLICE && lanes.clone().all(|v| !ring(v).is_empty()) && below_last);
+            whole.push(lanes.len() == SLICE && length[lanes].iter().all(|&l| l > 0) && below_last);
         }
         offsets.push(groups.len() as u32);
-        self.length.clear();
-        self.length.extend((0..n).map(|v| ring(v).len() as u32));
+        (self.offsets, self.groups, self.length, self.whole) = (offsets, groups, length, whole);
         if keep_spares {
-            (self.spare_starts, self.spare_entries) = (ring_start, entries);
+            (self.spare_starts, self.spare_entries, self.spare_kept) = (ring_start, entries, kept_slices);
+            (self.spare_offsets, self.spare_groups, self.spare_length, self.spare_whole) = old;
         }
     }
 
-    /// Room for a fraction `headroom` more vertices and ring entries (see `headroom`).
+    /// Room for a fraction `headroom` more vertices and ring entries (see `headroom`), and as
+    /// much in the spare buffers a rebuild makes its rings in.
     pub fn reserve_headroom(&mut self, headroom: f64) {
-        let n = self.length.len();
+        let (n, slices, groups) = (self.length.len(), self.whole.len(), self.groups.len());
         with_room(&mut self.offsets, headroom);
         with_room(&mut self.groups, headroom);
         with_room(&mut self.length, headroom);
         with_room(&mut self.whole, headroom);
         reserve_for(&mut self.spare_starts, n + 1, headroom);
         reserve_for(&mut self.spare_entries, 6 * n + 64, headroom);
+        reserve_for(&mut self.spare_kept, slices, headroom);
+        reserve_for(&mut self.spare_offsets, slices + 1, headroom);
+        reserve_for(&mut self.spare_groups, groups, headroom);
+        reserve_for(&mut self.spare_length, n, headroom);
+        reserve_for(&mut self.spare_whole, slices, headroom);
+    }
+
+    /// Whether both hold the same rings (their spare buffers aside).
+    #[cfg(test)]
+    pub fn same_rings(&self, other: &FanRings) -> bool {
+        (&self.offsets, &self.groups, &self.length, &self.whole)
+            == (&other.offsets, &other.groups, &other.length, &other.whole)
     }
 
     /// Whether vertex v's fan is one closed ring.
@@ -184,7 +244,14 @@ impl FanRings {
             + self.groups.capacity() * std::mem::size_of::<[u32; SLICE]>()
             + self.length.capacity() * 4
             + self.whole.capacity()
-            + (self.spare_starts.capacity() + self.spare_entries.capacity()) * 4
+            + (self.spare_starts.capacity()
+                + self.spare_entries.capacity()
+                + self.spare_offsets.capacity()
+                + self.spare_length.capacity())
+                * 4
+            + self.spare_groups.capacity() * std::mem::size_of::<[u32; SLICE]>()
+            + self.spare_kept.capacity()
+            + self.spare_whole.capacity()
     }
 }
 

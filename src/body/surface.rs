@@ -82,6 +82,10 @@ pub(crate) struct Fracture {
     /// 0.8 ms of each step's 5 ms fracture phase. Unsorted between [`Fracture::mark`] and the
     /// next record.
     pub pending: Vec<u32>,
+    /// Per vertex, whether the last topology change changed its fan (a face around it, before
+    /// or after, changed its corners; a vertex it appended): what the gas's rings are made
+    /// again for ([`Fracture::mark_changed`]).
+    pub changed: Vec<bool>,
 }
 
 impl Fracture {
@@ -93,6 +97,7 @@ impl Fracture {
             before: Vec::new(),
             in_core: Vec::new(),
             opened_rest: Vec::new(),
+            changed: Vec::new(),
             pending: Vec::new(),
         }
     }
@@ -213,7 +218,29 @@ impl Fracture {
         fracture.spare = TopologySpare::for_topology(topology, headroom);
         fracture.before = vec![[u32::MAX; 3]; face_count + more(face_count)];
         fracture.before.clear();
+        crate::body::headroom::reserve_for(&mut fracture.changed, vertex_count, headroom);
         fracture
+    }
+
+    /// Starts the marks of a topology change: no vertex of the `vertex_count` changed yet.
+    pub fn start_marks(&mut self, vertex_count: usize) {
+        self.changed.clear();
+        self.changed.resize(vertex_count, false);
+    }
+
+    /// Marks in [`Fracture::changed`] (sized for `vertex_count` vertices, the new ones marked)
+    /// the vertices of every face that differs between `before` and `triangles` (faces keep
+    /// their index; new ones are appended), on both versions of the face.
+    pub fn mark_changed(&mut self, before: &[[u32; 3]], triangles: &[[u32; 3]], vertex_count: usize) {
+        self.changed.resize(vertex_count, true);
+        for (f, t) in triangles.iter().enumerate() {
+            let old = before.get(f);
+            if old != Some(t) {
+                for &v in t.iter().chain(old.into_iter().flatten()) {
+                    self.changed[v as usize] = true;
+                }
+            }
+        }
     }
 
     pub fn memory_bytes(&self) -> usize {
@@ -224,6 +251,7 @@ impl Fracture {
             + self.in_core.capacity()
             + self.opened_rest.capacity() * std::mem::size_of::<(u32, f32)>()
             + self.pending.capacity() * 4
+            + self.changed.capacity()
     }
 
     /// Appends a vertex at `x` with velocity `v` and `mass`, split from `from` (pinned if `from`
