@@ -154,7 +154,12 @@ impl FanRings {
                 }
                 length.extend(lanes.clone().map(|v| ring(v).len() as u32));
             }
-            // (Measured again for a kept slice too: `n` may have grown past its entries.)
+            // A kept slice that was whole still is (its entries stay below the last point as
+            // `n` grows); one that was not is measured again, as every other slice.
+            if kept_slices[s] && old.3[s] {
+                whole.push(true);
+                continue;
+            }
             let below_last = groups[first..].iter().flatten().all(|&i| (i as usize) + 1 < n);
             whole.push(lanes.len() == SLICE && length[lanes].iter().all(|&l| l > 0) && below_last);
         }
