@@ -567,7 +567,7 @@ pub unsafe extern "C" fn softshell_body_apply_impulse(
 /// as a spring over `break_strain`. The surface opens where a chain of broken edges passes through
 /// a vertex (that vertex is split; copies are appended), and each side of the opened edge is then
 /// a spring of its own face. Bumps the topology generation. Works whatever the break limits are;
-/// a body made without any builds its topology and fracture buffers at its first cut (3-6 ms on
+/// a body made without any builds its topology and fracture buffers at its first cut (3-9 ms on
 /// the issue-5 balloon, 10,242 vertices, against 0.7-1.5 ms for a cut of 1 to 100 edges on the
 /// same body made with a break limit, which reserves them when it is made: give a body that
 /// will be cut a limit it never reaches, `break_strain` 1e6 say, to cut at a steady cost).
