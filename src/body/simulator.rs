@@ -1624,7 +1624,7 @@ impl Body {
             let (gas, springs) = self.pool.join(
                 || {
                     let t = Instant::now();
-                    let gas = old_gas.map(|old| {
+                    old_gas.map(|old| {
                         let mut gas = Gas::after_change(
                             old,
                             &nodes.x,
@@ -1642,8 +1642,7 @@ impl Body {
                             trace_phase("rebuild: the gas's corners", t);
                         }
                         gas
-                    });
-                    gas
+                    })
                 },
                 || {
                     let t = Instant::now();
