@@ -173,7 +173,12 @@ impl FanRings {
 
     /// Room for a fraction `headroom` more vertices and ring entries (see `headroom`), and as
     /// much in the spare buffers a rebuild makes its rings in.
+    /// Nothing for rings not made: a body stepped by an integrator that never makes them (XPBD,
+    /// the explicit ones) would hold spare buffers it never uses (SPEC 5).
     pub fn reserve_headroom(&mut self, headroom: f64) {
+        if self.length.is_empty() {
+            return;
+        }
         let (n, slices, groups) = (self.length.len(), self.whole.len(), self.groups.len());
         with_room(&mut self.offsets, headroom);
         with_room(&mut self.groups, headroom);

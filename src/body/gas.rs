@@ -72,8 +72,10 @@ pub(crate) struct Gas {
     pub open_area: Vec<f64>,
     /// True when the last measurement clamped a volume (near-zero or inverted fragment).
     pub clamped: bool,
-    /// The triangle corners at each vertex in CSR form (`3 face + corner`, faces ascending), made
-    /// on the first parallel measurement: lets it gather per vertex instead of scattering.
+    /// The triangle corners at each vertex in CSR form (each corner's next and previous vertex
+    /// and its face's fragment, faces ascending), made with the body and after each topology
+    /// change for the implicit integrator ([`Gas::prepare_corners`]): lets the parallel
+    /// measurement gather per vertex instead of scattering.
     corner_offsets: Vec<u32>,
     corners: Vec<Corner>,
     /// Per vertex: its corners close a ring around it (every neighbour is once the next and once
@@ -678,7 +680,8 @@ impl Gas {
     /// unless they are made (only the implicit integrator's parallel gathering uses them). A new
     /// body stepped by it makes them before its first step (on the issue-5 balloon, 10,242
     /// vertices, about 1 ms that the first step took on top of its own work); after a topology
-    /// change the next step does (the cracking step does not wait for them).
+    /// change the cracking step makes them in its fracture phase
+    /// ([`Gas::prepare_corners_after_change`]), so here they are made already.
     pub fn prepare_corners(&mut self, triangles: &[[u32; 3]], n: usize) {
         if self.corner_offsets.len() != n + 1 {
             self.build_corners(triangles, n, None);
@@ -1219,6 +1222,22 @@ mod tests {
             assert_eq!(gas.rings.is_ring(v as usize), v >= 4, "vertex {v}");
             assert_eq!(closed, v == 0 || v >= 4, "vertex {v}");
         }
+    }
+
+    /// The room reserved for a body that may crack is for corner lists and rings that were
+    /// made: a gas whose body never makes them (XPBD, explicit integrators) gets none (it held
+    /// spare ring buffers, found by review).
+    #[test]
+    fn a_gas_without_corners_reserves_no_room_for_them() {
+        let (_, t) = tetra();
+        let mut gas = Gas::new(4, &t, &vec![0; t.len()], 1, &[]);
+        let before = gas.memory_bytes();
+        gas.reserve_headroom(0.125);
+        assert_eq!(gas.memory_bytes(), before, "room for corners never made");
+        gas.prepare_corners(&t, 4);
+        let made = gas.memory_bytes();
+        gas.reserve_headroom(0.125);
+        assert!(gas.memory_bytes() > made, "room for the corners made");
     }
 
     #[test]

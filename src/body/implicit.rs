@@ -316,15 +316,19 @@ impl ImplicitScratch {
 
     /// Room for a fraction `headroom` more vertices and springs than `n` and `springs` in the
     /// buffers a topology change grows (see `headroom`), for a body that may crack; with
-    /// `obstacles`, in the contact buffers too. After [`ImplicitScratch::prepare`].
-    pub fn reserve_headroom(&mut self, n: usize, springs: usize, headroom: f64, obstacles: bool) {
+    /// `obstacles`, in the contact buffers too, and with `gas`, in the gas gradient (a body
+    /// without gas never writes it: no room for it either, SPEC 5). After
+    /// [`ImplicitScratch::prepare`].
+    pub fn reserve_headroom(&mut self, n: usize, springs: usize, headroom: f64, obstacles: bool, gas: bool) {
         for buffer in
             [&mut self.rhs, &mut self.dv, &mut self.saved_dv, &mut self.r, &mut self.z, &mut self.p, &mut self.ap]
         {
             reserve_for(buffer, n, headroom);
         }
         reserve_for(&mut self.inv_diag, n, headroom);
-        reserve_for(&mut self.gradient, n, headroom);
+        if gas {
+            reserve_for(&mut self.gradient, n, headroom);
+        }
         reserve_for(&mut self.spring_terms, springs, headroom);
         if obstacles {
             reserve_for(&mut self.contact_slot, n, headroom);
