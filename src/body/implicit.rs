@@ -306,7 +306,7 @@ impl ImplicitScratch {
     /// ones, 6.4 ms of it the coarse factor and about 1,400 page faults the buffers. The same
     /// inputs (the rest positions) as the first substep's, so the same coarse level.
     pub fn prepare(&mut self, model: &Model, x: &[Vec3], h: f32, threads: usize) {
-        self.size_buffers(model, x.len());
+        self.lay_out(model.springs, x.len());
         self.spring_terms.resize(model.springs.len(), SpringTerms::default());
         if self.coarse_h == 0.0 {
             self.coarse = CoarseSpace::new(model, x, h, threads);
@@ -341,14 +341,8 @@ impl ImplicitScratch {
     }
 
     /// The per-vertex buffers every substep writes and the coupling layout, sized for `n`
-    /// vertices and the springs of `model`.
-    fn size_buffers(&mut self, model: &Model, n: usize) {
-        self.lay_out(model.springs, n);
-    }
-
-    /// [`ImplicitScratch::size_buffers`] for `n` vertices and `springs`: a topology change calls
-    /// it, so that the step that changed the topology makes what the next would (nothing, if
-    /// it is made).
+    /// vertices and `springs` (nothing to do when they are). Every substep calls it, and a
+    /// topology change too, so that the step that changed the topology makes them, not the next.
     pub fn lay_out(&mut self, springs: &Springs, n: usize) {
         for buffer in [&mut self.rhs, &mut self.r, &mut self.z, &mut self.p, &mut self.ap] {
             buffer.resize(n, Vec3A::ZERO);
@@ -1643,7 +1637,7 @@ pub(crate) fn substep(
     };
     // Set again by the last pass (a substep that does not reach it leaves the step to check).
     s.all_finite = false;
-    s.size_buffers(model, n);
+    s.lay_out(model.springs, n);
     // Without wind the assembly adds gravity and the pressure per vertex (two serial passes
     // fewer); with wind the external forces are gathered here first.
     let wind = model.has_wind();

@@ -3,6 +3,7 @@
 
 use glam::Vec3;
 
+use super::headroom::reserve_for;
 use super::springs::{Adjacency, Springs};
 use crate::mesh::{Topology, TopologySpare};
 
@@ -218,7 +219,7 @@ impl Fracture {
         fracture.spare = TopologySpare::for_topology(topology, headroom);
         fracture.before = vec![[u32::MAX; 3]; face_count + more(face_count)];
         fracture.before.clear();
-        crate::body::headroom::reserve_for(&mut fracture.changed, vertex_count, headroom);
+        reserve_for(&mut fracture.changed, vertex_count, headroom);
         fracture
     }
 
