@@ -584,3 +584,26 @@ fn symplectic_advice_counts_the_gas_stiffness() {
         assert!(stats.kinetic_energy.is_finite());
     }
 }
+
+/// A body so far from the origin that its f32 positions cannot resolve its motion (a 0.5 m ball
+/// 1e5 m up: positions move in steps of 7.8 mm there, its first step falls 1.4 mm) is UNSTABLE
+/// at any time step, and its message says why and what helps (it advised only more substeps,
+/// found by review); the same ball near the origin steps.
+#[test]
+fn a_body_far_from_the_origin_is_told_to_move_near_it() {
+    let (p, t) = icosphere(1, 0.5);
+    let far: Vec<f32> = p.chunks_exact(3).flat_map(|c| [c[0], c[1] + 1e5, c[2]]).collect();
+    let def = softshell_body_def_default();
+    let near = body(&p, &t, &def);
+    for _ in 0..5 {
+        step(&near);
+    }
+    let far = body(&far, &t, &def);
+    match try_step(&far) {
+        Err((status, message)) => {
+            assert_eq!(status, SoftshellStatus::Unstable, "{message}");
+            assert!(message.contains("from the origin") && message.contains("near the origin"), "{message}");
+        }
+        Ok(stats) => panic!("the far body stepped: {stats:?}"),
+    }
+}
