@@ -607,3 +607,45 @@ fn a_body_far_from_the_origin_is_told_to_move_near_it() {
         Ok(stats) => panic!("the far body stepped: {stats:?}"),
     }
 }
+
+/// A step of implicit Euler whose energy made from nothing jumps by many orders of magnitude is
+/// UNSTABLE at once (the drift rule otherwise waits for a second step over its limit, as one
+/// step may spike): a light, very stiff body pushed by wind against a plane went from a drift
+/// of -1.1e11 J to 1.3e33 J in one step and returned OK (found by review).
+#[test]
+fn a_huge_jump_of_the_energy_drift_is_unstable_at_once() {
+    let planes: [([f32; 3], [f32; 3]); 2] = [
+        ([0.0, 2.0563602e-5, 0.0], [-0.081627846, -0.19251376, -0.2849782]),
+        ([0.0, -0.11276281, 0.0], [0.06855184, 0.03778088, 0.018837929]),
+    ];
+    for (point, normal) in planes {
+        let (p, t) = icosphere(1, 0.5);
+        let mut def = softshell_body_def_default();
+        def.total_mass = 1e-12;
+        def.spring_stiffness = 1e12;
+        def.gravity = [1e6, -1e6, 0.0];
+        def.drag = 1e6;
+        def.iterations = 100;
+        def.break_strain = 0.05;
+        let body = body(&p, &t, &def);
+        // SAFETY: live body, float[3] arguments.
+        let status = unsafe { softshell_body_add_plane_obstacle(body.0, point.as_ptr(), normal.as_ptr()) };
+        assert_eq!(status, SoftshellStatus::Ok, "{}", last_error());
+        // The first step loses 3e10-1e11 J (pushed out of the plane); after it, no step that returns
+        // OK may make a million times the largest drift so far.
+        let mut largest = step(&body).energy_drift.abs().max(1.0);
+        for k in 1..8 {
+            match try_step(&body) {
+                Ok(stats) => {
+                    let drift = stats.energy_drift;
+                    assert!(drift <= 1e6 * largest, "plane {normal:?}: step {k} OK with a drift of {drift:.3e} J");
+                    largest = largest.max(drift.abs());
+                }
+                Err((status, message)) => {
+                    assert_eq!(status, SoftshellStatus::Unstable, "{message}");
+                    break;
+                }
+            }
+        }
+    }
+}
