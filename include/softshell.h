@@ -45,7 +45,9 @@
 // `SOFTSHELL_STATUS_UNSTABLE` (rolled back; raise `substeps`) when even the finest fails: a
 // NaN, kinetic energy far beyond what the step had available, or the energy made without a
 // source (`energy_drift`) over 20 times what the body was given and more than doubled, two
-// steps in a row.
+// steps in a row. What it was given: its kinetic and spring energy when made, what gravity and
+// the gas have released, and the energy impulses and the wind gave (their positive work; the
+// energy drag takes away does not count).
 #define SOFTSHELL_INTEGRATOR_IMPLICIT_EULER 2
 
 // XPBD: springs as distance constraints with compliance 1/K_s, gas as a volume constraint;
