@@ -19,7 +19,7 @@ use super::settings::{BodySettings, Integrator, MAX_SUBSTEPS, MIN_TIME_STEP};
 use super::springs::{Springs, spring_strain};
 use super::surface::{Fracture, Nodes, build_springs, rebuild_springs};
 use super::vertex_order::VertexOrder;
-use super::wind::{DragState, add_wind};
+use super::wind::{DragState, add_wind, power_bound};
 use super::xpbd::{self, XpbdScratch};
 use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::{Topology, TriMesh, first_degenerate_triangle, require_closed_oriented_solid};
@@ -136,8 +136,9 @@ pub struct Body {
     /// The work of the wind and of impulses and pins so far (signed: drag and an impulse against
     /// the motion take energy away).
     external_work: f64,
-    /// The energy they gave, the positive parts of that work summed: the drift test's share of
-    /// what the body was given. The signed sum's magnitude was used before, and a blow-up in
+    /// The energy they gave, the positive parts of that work summed (the wind's each substep at
+    /// most what the wind can give: `wind::power_bound`): the drift test's share of what the
+    /// body was given. The signed sum's magnitude was used before, and a blow-up in
     /// wind fed it: an exploding vertex loses energy to drag, so its own dissipation raised the
     /// reference the energy it made was held to (a random session: 8 mg ball, implicit Euler,
     /// drift 3e7 -> 2e10 -> 5e12 J in two steps, both OK, against wind work of -7e9 and -2e12 J).
@@ -1095,11 +1096,25 @@ impl Body {
         let mut subdivision = if implicit { self.subdivision.clamp(1, self.max_subdivision()) } else { 1 };
         let refined_at_start = subdivision;
         let (mut substeps, mut h, mut work, mut diverged, mut after);
+        // The energy the wind gave in the step: its positive work, at most ten times what the
+        // wind can give the body as the step found it over the step (`power_bound`; ten times:
+        // the measured work is not the continuous one, a light corner sped up within the step
+        // takes the force of its start over a longer way, and a cloth may unfold). Not from the
+        // substeps' own shapes: a blown-up body's faces, stretched a million-fold by its first
+        // substep, raised the bound of the next as much.
+        let most_given = if self.settings.drag > 0.0 {
+            10.0 * self.settings.time_step as f64
+                * power_bound(&self.nodes.x, &self.triangles, self.settings.wind, self.settings.drag)
+        } else {
+            0.0
+        };
+        let mut given_work;
         let mut recent_growth;
         loop {
             substeps = base_substeps * subdivision;
             h = self.settings.time_step / substeps as f32;
             work = 0.0;
+            given_work = 0.0;
             diverged = None;
             after = before;
             // (What a rolled-back attempt clamped is not reported.)
@@ -1110,6 +1125,7 @@ impl Body {
                 clamped |= self.gas.as_ref().is_some_and(|g| g.clamped);
                 let (w, it) = self.substep(h, saved_by_substep && substep == 0);
                 work += w;
+                given_work += w.max(0.0);
                 iterations += it as u64;
                 clamped |= self.gas.as_ref().is_some_and(|g| g.clamped);
                 // The implicit integrator checks this in its last pass; the others are scanned
@@ -1173,6 +1189,7 @@ impl Body {
             }
             break;
         }
+        given_work = given_work.min(most_given);
         if diverged.is_none() {
             // Divergence shows as kinetic energy that no source explains: the kinetic and spring
             // energy at the start, what the gas and gravity released, and the external work.
@@ -1182,7 +1199,7 @@ impl Body {
                 + before.spring
                 + (before.gas - after.gas).max(0.0)
                 + (before.gravity - after.gravity).max(0.0)
-                + work.max(0.0);
+                + given_work;
             if !after.total().is_finite() {
                 diverged = Some("the energy became infinite".to_owned());
             } else if after.kinetic > 2.0 * available + 1e-9
@@ -1252,7 +1269,7 @@ impl Body {
                 (self.start_gravity - after.gravity).max(0.0) + (self.start_gas + self.gas_leaked - after.gas).max(0.0);
             // The energy given by external work: not its magnitude, which a blow-up's drag
             // feeds (see `external_given`).
-            let reference = given + released + self.external_given + work.max(0.0);
+            let reference = given + released + self.external_given + given_work;
             let noise = EXCESS_NOISE * (after.kinetic + after.spring + after.gravity.abs() + after.gas.abs());
             // Explicit Euler gains `m (h g)² / 2` a substep from gravity alone (its positions
             // lag its velocities): a body falling from rest makes as much by its second step
@@ -1328,7 +1345,7 @@ impl Body {
         }
         self.subdivision = subdivision;
         self.external_work += work;
-        self.external_given += work.max(0.0);
+        self.external_given += given_work;
         self.steps += 1;
         self.time += self.settings.time_step as f64;
         // `after` measured the gas at these positions; only the leak changes its energy.
@@ -1361,7 +1378,8 @@ impl Body {
     }
 
     /// One substep; with `save`, the implicit integrator copies the state it starts from into
-    /// `saved_x` and `saved_v` (sized already).
+    /// `saved_x` and `saved_v` (sized already). Returns the wind's work and the solver's
+    /// iterations.
     fn substep(&mut self, h: f32, save: bool) -> (f64, usize) {
         // Work of the wind over the substep: its force at the start times the displacement.
         if self.settings.drag > 0.0 {

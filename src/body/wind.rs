@@ -64,6 +64,26 @@ pub(crate) fn add_wind(state: &DragState, wind: Vec3, drag: f32, f: &mut [Vec3],
     power
 }
 
+/// The most power the wind can give the mesh at positions `x`, W: `Σ drag A (w·n)² / 4` over
+/// its faces. A face moving at `b = v·n` in a wind `a = w·n` takes `drag A (a - b) b`, at most
+/// `drag A a² / 4` (at `b = a/2`) whatever its speed. The step control holds the wind's work to
+/// it ([`super::simulator`]): the work it measures (the force at a substep's start times the
+/// displacement) grew without bound on a blown-up body, whose corners swapped huge velocities
+/// within the substep, and so explained away the energy the blow-up made.
+pub(crate) fn power_bound(x: &[Vec3], triangles: &[[u32; 3]], wind: Vec3, drag: f32) -> f64 {
+    let wind = wind.as_dvec3();
+    triangles
+        .iter()
+        .map(|t| {
+            let p = t.map(|i| x[i as usize].as_dvec3());
+            let area_vector = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]); // A n
+            let area = area_vector.length();
+            // drag A (w·n)² / 4 = drag (w·(A n))² / (4 A)
+            if area > 0.0 { drag as f64 * wind.dot(area_vector).powi(2) / (4.0 * area) } else { 0.0 }
+        })
+        .sum()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -97,6 +117,27 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The power the drag gives a face, over every speed of the face along its normal, never
+    /// exceeds [`power_bound`], and reaches it at half the wind's normal speed.
+    #[test]
+    fn the_power_bound_holds_at_every_speed_and_is_reached() {
+        let x = [Vec3::ZERO, Vec3::new(2.0, 0.0, 0.5), Vec3::new(0.3, 0.2, 2.0)];
+        let triangles = [[0u32, 1, 2]];
+        let (wind, drag) = (Vec3::new(1.0, -4.0, 0.5), 0.7);
+        let bound = power_bound(&x, &triangles, wind, drag);
+        let normal = (x[1] - x[0]).cross(x[2] - x[0]).normalize();
+        let a = wind.dot(normal);
+        let mut largest = 0.0f64;
+        for k in -200..=200 {
+            let v = normal * (a * k as f32 / 100.0) + Vec3::new(0.3, 0.0, -0.2);
+            let corner = face_drag(x, [v; 3], wind, drag);
+            let power = 3.0 * corner.dot(v) as f64;
+            assert!(power <= bound * (1.0 + 1e-5), "speed {k}/100 of the wind's: {power} > {bound}");
+            largest = largest.max(power);
+        }
+        assert!(largest >= bound * (1.0 - 1e-4), "{largest} never reaches {bound}");
     }
 
     #[test]
