@@ -151,12 +151,12 @@ fn a_plain_body_holds_its_state_and_its_integrators_vectors_only() {
     let springs = faces * 3 / 2; // closed mesh
     let state = 44 * n + 24 * n + 8 * n + 16 * faces + 12 * springs;
     // The integrators' own vectors: explicit and symplectic Euler a force and a gas gradient
-    // per vertex (12 bytes each); XPBD those and the substep's displacement, and a multiplier per
-    // spring (4).
+    // per vertex (12 bytes each); XPBD those and the substep's displacement, and a multiplier
+    // and a push per spring (4 + 12: the push is re-aimed at the spring's direction, SPEC 2.2).
     for (integrator, per_vertex, per_spring) in [
         (SOFTSHELL_INTEGRATOR_EXPLICIT_EULER, 24, 0),
         (SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, 24, 0),
-        (SOFTSHELL_INTEGRATOR_XPBD, 36, 4),
+        (SOFTSHELL_INTEGRATOR_XPBD, 36, 16),
     ] {
         let def = SoftshellBodyDef { integrator, spring_stiffness: 10.0, ..body_def() };
         let body = Body::new(&p, &t, &def).unwrap();

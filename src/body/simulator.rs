@@ -1462,7 +1462,7 @@ impl Body {
             f.resize(self.nodes.len(), Vec3::ZERO);
             let model = model_of!(self);
             let h = self.settings.time_step / self.settings.substeps.max(1) as f32;
-            if xpbd::add_applied_forces(&model, self.gas.as_mut(), &self.nodes.x, h, s, &mut f) {
+            if xpbd::add_applied_forces(&model, self.gas.as_ref(), h, s, &mut f) {
                 self.load = f;
                 return;
             }
