@@ -83,14 +83,19 @@ fn the_shell_reports_every_array_it_holds() {
 fn the_body_reports_what_it_holds_while_stepping() {
     let (p, t) = unit_obj("sphere.obj", 1.0);
     let plain = SoftshellBodyDef { gravity: [0.0; 3], threads: 1, ..softshell_body_def_default() };
-    for def in [plain, SoftshellBodyDef { gas_amount: 1.0, ..plain }] {
+    // XPBD too: its scratch holds a push per spring and, with gas, per vertex.
+    let xpbd = SoftshellBodyDef { integrator: SOFTSHELL_INTEGRATOR_XPBD, ..plain };
+    for def in
+        [plain, SoftshellBodyDef { gas_amount: 1.0, ..plain }, xpbd, SoftshellBodyDef { gas_amount: 1.0, ..xpbd }]
+    {
         let before = live();
         let body = Body::new(&p, &t, &def).unwrap();
         for step in 0..4 {
             let (reported, held) = (body.memory() as isize, live() - before);
             assert!(
                 (reported - held).abs() <= 256,
-                "gas {} after {step} steps: reports {reported}, holds {held}",
+                "integrator {}, gas {} after {step} steps: reports {reported}, holds {held}",
+                def.integrator,
                 def.gas_amount
             );
             body.step().unwrap();
