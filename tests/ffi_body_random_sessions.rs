@@ -22,40 +22,12 @@
 #![cfg(feature = "body")]
 
 mod body_util;
+mod random;
 
 use body_util::*;
+use random::{Rng, count, seeds};
 use softshell::ffi::SoftshellStatus;
 use softshell::ffi::body::*;
-
-/// SplitMix64: small, and the same sequence on every platform.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-    fn chance(&mut self, p: f64) -> bool {
-        self.unit() < p
-    }
-    fn uniform(&mut self, low: f64, high: f64) -> f32 {
-        (low + (high - low) * self.unit()) as f32
-    }
-    /// 10^u, u uniform in [low, high).
-    fn decades(&mut self, low: f64, high: f64) -> f32 {
-        10f64.powf(low + (high - low) * self.unit()) as f32
-    }
-}
 
 /// A scene: a closed ball (gas or not) or an open cloth (no gas), and its def.
 struct Scene {
@@ -128,13 +100,7 @@ fn extreme_scene(rng: &mut Rng) -> Scene {
     let mut scene = random_scene(rng);
     let d = &mut scene.def;
     let closed = scene.closed;
-    let mut end = |low: f32, high: f32| -> Option<f32> {
-        match rng.below(8) {
-            0 => Some(low),
-            1 => Some(high),
-            _ => None,
-        }
-    };
+    let mut end = |low: f32, high: f32| rng.end(low, high);
     if let Some(h) = end(1e-6, 1.0) {
         d.time_step = h;
     }
@@ -596,14 +562,8 @@ impl std::fmt::Debug for DefSummary<'_> {
 
 #[test]
 fn random_sessions_of_calls_keep_every_promise_of_the_abi() {
-    let seeds = match std::env::var("SOFTSHELL_RANDOM_SESSIONS") {
-        Ok(range) => {
-            let (a, b) = range.split_once("..").expect("SOFTSHELL_RANDOM_SESSIONS=<first>..<end>");
-            a.parse().expect("first seed")..b.parse().expect("end seed")
-        }
-        Err(_) => 0..60u64,
-    };
-    let actions: usize = std::env::var("SOFTSHELL_RANDOM_ACTIONS").ok().and_then(|n| n.parse().ok()).unwrap_or(40);
+    let seeds = seeds("SOFTSHELL_RANDOM_SESSIONS", 0..60u64);
+    let actions = count("SOFTSHELL_RANDOM_ACTIONS", 40);
     let mut tally = Tally::default();
     for seed in seeds.clone() {
         run_session(seed, actions, random_scene, &mut tally);
@@ -635,14 +595,8 @@ fn a_blow_up_in_wind_is_not_passed_as_ok() {
 /// without the count of steps that went well (at these ends most fail, as they should).
 #[test]
 fn random_sessions_at_the_ends_of_the_ranges_keep_every_promise_of_the_abi() {
-    let seeds = match std::env::var("SOFTSHELL_EXTREME_SESSIONS") {
-        Ok(range) => {
-            let (a, b) = range.split_once("..").expect("SOFTSHELL_EXTREME_SESSIONS=<first>..<end>");
-            a.parse().expect("first seed")..b.parse().expect("end seed")
-        }
-        Err(_) => 1_000_000..1_000_040u64,
-    };
-    let actions: usize = std::env::var("SOFTSHELL_RANDOM_ACTIONS").ok().and_then(|n| n.parse().ok()).unwrap_or(30);
+    let seeds = seeds("SOFTSHELL_EXTREME_SESSIONS", 1_000_000..1_000_040u64);
+    let actions = count("SOFTSHELL_RANDOM_ACTIONS", 30);
     let mut tally = Tally::default();
     for seed in seeds.clone() {
         run_session(seed, actions, extreme_scene, &mut tally);

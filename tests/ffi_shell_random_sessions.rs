@@ -14,49 +14,15 @@
 #![cfg(feature = "shell")]
 
 mod common;
+mod random;
 
 use std::ptr::null_mut;
 
 use common::*;
+use random::{Rng, count, seeds};
 use softshell::ffi::SoftshellStatus;
 use softshell::ffi::mesh::*;
 use softshell::ffi::shell::*;
-
-/// SplitMix64 (as in tests/ffi_body_random_sessions.rs).
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-    fn chance(&mut self, p: f64) -> bool {
-        self.unit() < p
-    }
-    fn uniform(&mut self, low: f64, high: f64) -> f32 {
-        (low + (high - low) * self.unit()) as f32
-    }
-    fn decades(&mut self, low: f64, high: f64) -> f32 {
-        10f64.powf(low + (high - low) * self.unit()) as f32
-    }
-    /// `low` or `high` with probability 1/8 each, else None.
-    fn end(&mut self, low: f32, high: f32) -> Option<f32> {
-        match self.below(8) {
-            0 => Some(low),
-            1 => Some(high),
-            _ => None,
-        }
-    }
-}
 
 fn random_def(rng: &mut Rng) -> SoftshellShellDef {
     let mut d = softshell_shell_def_default();
@@ -274,14 +240,8 @@ fn run_session(seed: u64, actions: usize, tally: &mut Tally) {
 
 #[test]
 fn random_shell_sessions_keep_every_promise_of_the_abi() {
-    let seeds = match std::env::var("SOFTSHELL_SHELL_SESSIONS") {
-        Ok(range) => {
-            let (a, b) = range.split_once("..").expect("SOFTSHELL_SHELL_SESSIONS=<first>..<end>");
-            a.parse().expect("first seed")..b.parse().expect("end seed")
-        }
-        Err(_) => 0..40u64,
-    };
-    let actions: usize = std::env::var("SOFTSHELL_SHELL_ACTIONS").ok().and_then(|n| n.parse().ok()).unwrap_or(12);
+    let seeds = seeds("SOFTSHELL_SHELL_SESSIONS", 0..40u64);
+    let actions = count("SOFTSHELL_SHELL_ACTIONS", 12);
     let mut tally = Tally::default();
     for seed in seeds.clone() {
         run_session(seed, actions, &mut tally);

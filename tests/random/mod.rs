@@ -1,0 +1,58 @@
+//! Shared by the random-session tests (tests/ffi_*_random_sessions.rs): a small random number
+//! generator that gives the same sequence on every platform, and the seed and length settings
+//! read from the environment.
+#![allow(dead_code)]
+
+/// SplitMix64: small, and the same sequence on every platform.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    pub fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+    pub fn chance(&mut self, p: f64) -> bool {
+        self.unit() < p
+    }
+    pub fn uniform(&mut self, low: f64, high: f64) -> f32 {
+        (low + (high - low) * self.unit()) as f32
+    }
+    /// 10^u, u uniform in [low, high).
+    pub fn decades(&mut self, low: f64, high: f64) -> f32 {
+        10f64.powf(low + (high - low) * self.unit()) as f32
+    }
+    /// `low` or `high` (the ends of a documented range) with probability 1/8 each, else None.
+    pub fn end(&mut self, low: f32, high: f32) -> Option<f32> {
+        match self.below(8) {
+            0 => Some(low),
+            1 => Some(high),
+            _ => None,
+        }
+    }
+}
+
+/// The seeds `<first>..<end>` given in the environment variable `name`, else `default`.
+pub fn seeds(name: &str, default: std::ops::Range<u64>) -> std::ops::Range<u64> {
+    match std::env::var(name) {
+        Ok(range) => {
+            let (a, b) = range.split_once("..").unwrap_or_else(|| panic!("{name}=<first>..<end>"));
+            a.parse().expect("first seed")..b.parse().expect("end seed")
+        }
+        Err(_) => default,
+    }
+}
+
+/// The count in the environment variable `name`, else `default`.
+pub fn count(name: &str, default: usize) -> usize {
+    std::env::var(name).ok().and_then(|n| n.parse().ok()).unwrap_or(default)
+}
