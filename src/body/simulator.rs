@@ -136,9 +136,9 @@ pub struct Body {
     /// The work of the wind and of impulses and pins so far (signed: drag and an impulse against
     /// the motion take energy away).
     external_work: f64,
-    /// The energy they gave, the positive parts of that work summed (the wind's each substep at
-    /// most what the wind can give: `wind::power_bound`): the drift test's share of what the
-    /// body was given. The signed sum's magnitude was used before, and a blow-up in
+    /// The energy they gave, the positive parts of that work summed (the wind's in each step at
+    /// most ten times what it can give over the step: `wind::power_bound`): the drift test's
+    /// share of what the body was given. The signed sum's magnitude was used before, and a blow-up in
     /// wind fed it: an exploding vertex loses energy to drag, so its own dissipation raised the
     /// reference the energy it made was held to (a random session: 8 mg ball, implicit Euler,
     /// drift 3e7 -> 2e10 -> 5e12 J in two steps, both OK, against wind work of -7e9 and -2e12 J).
