@@ -229,8 +229,10 @@ fn check_state(s: &Snapshot, input_vertices: usize, mass: f64, what: &str) {
 struct EnergyBudget {
     impulses: f64,
     wind: f64,
-    /// `M |g|` and the largest height along `-g` of a vertex when the body was made.
+    /// `M |g|`, the unit vector along g (zero without gravity) and the largest height along
+    /// `-g` of a vertex when the body was made.
     weight: f64,
+    down: [f64; 3],
     top: f64,
     gas: f64,
 }
@@ -265,14 +267,23 @@ impl EnergyBudget {
     fn new(def: &SoftshellBodyDef, start: &Snapshot) -> Self {
         let g = def.gravity.map(|c| c as f64);
         let g_length = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
-        let top = (0..start.vertex_count()).map(|i| height(def, start, i)).fold(f64::NEG_INFINITY, f64::max);
-        Self {
+        let down = if g_length > 0.0 { g.map(|c| c / g_length) } else { [0.0; 3] };
+        let mut budget = Self {
             impulses: 0.0,
             wind: 0.0,
             weight: start.total_mass() * g_length,
-            top: if g_length > 0.0 { top } else { 0.0 },
+            down,
+            top: 0.0,
             gas: 50.0 * def.gas_amount as f64,
-        }
+        };
+        budget.top = (0..start.vertex_count()).map(|i| budget.height(start, i)).fold(f64::NEG_INFINITY, f64::max);
+        budget
+    }
+
+    /// Vertex i's height along -g (0 without gravity).
+    fn height(&self, s: &Snapshot, i: usize) -> f64 {
+        let p = s.position(i);
+        -(0..3).map(|k| self.down[k] * p[k] as f64).sum::<f64>()
     }
 
     /// The wind's bound for a step from `before` to `after`.
@@ -283,22 +294,11 @@ impl EnergyBudget {
     }
 
     /// The bound at the state `now`.
-    fn total(&self, def: &SoftshellBodyDef, now: &Snapshot) -> f64 {
-        let lowest = (0..now.vertex_count()).map(|i| height(def, now, i)).fold(f64::INFINITY, f64::min);
-        let gravity = if self.weight > 0.0 { self.weight * (self.top - lowest).max(0.0) } else { 0.0 };
+    fn total(&self, now: &Snapshot) -> f64 {
+        let lowest = (0..now.vertex_count()).map(|i| self.height(now, i)).fold(f64::INFINITY, f64::min);
+        let gravity = self.weight * (self.top - lowest).max(0.0);
         self.impulses + self.wind + gravity + self.gas
     }
-}
-
-/// Vertex i's height along -g (0 without gravity).
-fn height(def: &SoftshellBodyDef, s: &Snapshot, i: usize) -> f64 {
-    let g = def.gravity.map(|c| c as f64);
-    let g_length = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
-    if g_length == 0.0 {
-        return 0.0;
-    }
-    let p = s.position(i);
-    -(0..3).map(|k| g[k] * p[k] as f64).sum::<f64>() / g_length
 }
 
 fn run_session(seed: u64, actions: usize, make_scene: fn(&mut Rng) -> Scene, tally: &mut Tally) {
@@ -357,7 +357,7 @@ fn run_session(seed: u64, actions: usize, make_scene: fn(&mut Rng) -> Scene, tal
                             stats.fragment_count,
                             stats.springs_broken,
                             stats.cores_released,
-                            budget.total(&scene.def, &after)
+                            budget.total(&after)
                         );
                     }
                     assert!(finite_stats(&stats), "{what}: stats {stats:?}");
@@ -368,7 +368,7 @@ fn run_session(seed: u64, actions: usize, make_scene: fn(&mut Rng) -> Scene, tal
                     check_state(&after, input_vertices, mass, &what);
                     budget.add_wind_step(&scene.def, &current, &after);
                     if implicit {
-                        let given = budget.total(&scene.def, &after);
+                        let given = budget.total(&after);
                         let over = stats.energy_drift > IMPLICIT_DRIFT_LIMIT * given
                             && stats.energy_drift > 2.0 * drift_before.max(0.0);
                         assert!(
