@@ -216,6 +216,30 @@ fn check_state(s: &Snapshot, input_vertices: usize, mass: f64, what: &str) {
     assert!(s.origins.iter().all(|&o| (o as usize) < input_vertices), "{what}: an origin out of range");
 }
 
+/// The stats of an OK step say what the buffers after it say: the kinetic energy of the
+/// velocities and masses (summed in f64 from f32 values: rounding only), every piece numbered
+/// in `0..fragment_count` and each number used, no pressure without gas, and a strain that is
+/// not negative.
+fn check_stats_against_buffers(stats: &SoftshellBodyStats, s: &Snapshot, def: &SoftshellBodyDef, what: &str) {
+    let kinetic = kinetic(s);
+    assert!(
+        (stats.kinetic_energy - kinetic).abs() <= 1e-4 * kinetic + 1e-30,
+        "{what}: stats say a kinetic energy of {:e} J, the velocities and masses {kinetic:e} J",
+        stats.kinetic_energy
+    );
+    let mut used = vec![false; s.fragment_count];
+    for &f in &s.fragments {
+        assert!((f as usize) < s.fragment_count, "{what}: fragment id {f} of {} pieces", s.fragment_count);
+        used[f as usize] = true;
+    }
+    assert!(used.iter().all(|&u| u), "{what}: a piece number in 0..{} has no face", s.fragment_count);
+    assert!(stats.pressure >= 0.0, "{what}: pressure {}", stats.pressure);
+    if def.gas_amount == 0.0 {
+        assert_eq!(stats.pressure, 0.0, "{what}: a pressure without gas");
+    }
+    assert!(stats.max_strain >= 0.0, "{what}: strain {}", stats.max_strain);
+}
+
 /// An upper bound of the energy a body has been given since it was made, from what the test
 /// sees through the ABI (the body is made at rest in its rest shape: no kinetic or spring
 /// energy): the kinetic energy impulses added, what gravity can have released down to the
@@ -365,6 +389,7 @@ fn run_session(seed: u64, actions: usize, make_scene: fn(&mut Rng) -> Scene, tal
                     assert_eq!(stats.triangle_count, after.triangle_count(), "{what}");
                     assert_eq!(stats.fragment_count, after.fragment_count, "{what}");
                     assert_eq!(stats.topology_generation, after.generation, "{what}");
+                    check_stats_against_buffers(&stats, &after, &scene.def, &what);
                     check_state(&after, input_vertices, mass, &what);
                     budget.add_wind_step(&scene.def, &current, &after);
                     if implicit {
