@@ -844,7 +844,10 @@ impl Gas {
         }
         let mut cursor = offsets[..n].to_vec();
         let mut corners = std::mem::take(&mut self.corners);
-        corners.clear();
+        // Every slot is written below: only slots beyond the old length are filled first (a
+        // clear then a fill wrote the issue-5 balloon's 0.7 MB of corners twice in each
+        // fracture phase).
+        corners.truncate(offsets[n] as usize);
         corners.resize(offsets[n] as usize, Corner { next: 0, prev: 0, fragment: 0 });
         for (t, &fragment) in triangles.iter().zip(&self.face_fragment) {
             for c in 0..3 {

@@ -59,7 +59,9 @@ impl Springs {
             offsets[v] += offsets[v - 1];
         }
         let mut adjacency = std::mem::take(&mut self.adjacency);
-        adjacency.clear();
+        // Every slot is written below: only slots beyond the old length are filled first (as
+        // in `Gas::build_corners`).
+        adjacency.truncate(2 * self.ends.len());
         adjacency.resize(2 * self.ends.len(), (0, 0));
         for (k, &[i, j]) in self.ends.iter().enumerate() {
             let slot = &mut offsets[i as usize + 1];
