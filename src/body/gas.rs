@@ -677,8 +677,9 @@ impl Gas {
     }
 
     /// Makes the corner lists and rings of the gradient for the `n` vertices and `triangles`
-    /// unless they are made (only the implicit integrator's parallel gathering uses them). A new
-    /// body stepped by it makes them before its first step (on the issue-5 balloon, 10,242
+    /// unless they are made (only the parallel gathering of implicit Euler and XPBD uses them:
+    /// `Integrator::gathers_gas_gradient`). A new body stepped by either makes them before its
+    /// first step (on the issue-5 balloon, 10,242
     /// vertices, about 1 ms that the first step took on top of its own work); after a topology
     /// change the cracking step makes them in its fracture phase
     /// ([`Gas::prepare_corners_after_change`]), so here they are made already.

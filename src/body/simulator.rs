@@ -391,9 +391,9 @@ impl Body {
         let fragment_count = topology.component_count;
         let gas = (settings.gas_amount > 0.0).then(|| {
             let mut gas = Gas::new(n, &triangles, &face_fragment, fragment_count, &topology.boundary_loops);
-            // (Only the implicit integrator gathers the gradient by corners; the others measure
-            // it face by face and never make them.)
-            if settings.integrator == Integrator::ImplicitEuler {
+            // (Implicit Euler and XPBD gather the gradient by corners; the explicit integrators
+            // measure it face by face and never make them.)
+            if settings.integrator.gathers_gas_gradient() {
                 gas.prepare_corners(&triangles, n);
             }
             gas.measure(&nodes.x, &triangles); // n_rt = 0: volumes only
@@ -1417,7 +1417,9 @@ impl Body {
                 let max_iterations = (10 * self.settings.iterations as usize).max(40);
                 implicit::substep(&model, gas, x, v, save, h, max_iterations, &self.pool, &self.obstacles, s)
             }
-            Scratch::Xpbd(s) => (xpbd::substep(&model, gas, x, v, h, self.settings.iterations, &self.obstacles, s), 0),
+            Scratch::Xpbd(s) => {
+                (xpbd::substep(&model, gas, x, v, h, self.settings.iterations, &self.obstacles, &self.pool, s), 0)
+            }
         };
         // XPBD handles contacts inside its iterations, implicit Euler in its last pass.
         if !self.obstacles.is_empty()
@@ -1698,7 +1700,7 @@ impl Body {
             let adjacency = self.settings.spring_adjacency();
             let (triangles, face_fragment, fragment_count) =
                 (&self.triangles, &self.face_fragment, self.fragment_count);
-            let (n, lay_out_corners) = (nodes.len(), implicit.is_some());
+            let (n, lay_out_corners) = (nodes.len(), self.settings.integrator.gathers_gas_gradient());
             // The gas's chain is the longer: first, on this thread (the other is the one a
             // worker may take, and a sleeping worker takes it late).
             let (gas, springs) = self.pool.join(
@@ -2158,31 +2160,40 @@ mod tests {
         }
     }
 
-    /// A body with gas stepped by implicit Euler makes its gas's corner lists when it is made,
-    /// not in its first step (a first step that took about twice the next on the issue-5
-    /// balloon); a topology change makes them again in its own fracture phase (it left them to
-    /// the next step, which paid that cost of the change). A body stepped by XPBD never makes
-    /// them (it measures the gradient face by face).
+    /// A body with gas stepped by implicit Euler or XPBD makes its gas's corner lists when it
+    /// is made, not in its first step (a first step that took about twice the next on the
+    /// issue-5 balloon); a topology change makes them again in its own fracture phase (it left
+    /// them to the next step, which paid that cost of the change). A body stepped by an
+    /// explicit integrator never makes them (it measures the gradient face by face).
     #[test]
     fn the_gas_corners_are_made_with_the_body() {
         let mesh = sphere(3);
         let topology = Topology::build(mesh.triangles(), mesh.positions().len());
-        let settings = BodySettings { integrator: Integrator::Xpbd, gas_amount: 200.0, ..BodySettings::default() };
-        let mut xpbd = Body::new(&mesh, &topology, settings).unwrap();
-        let n = xpbd.vertex_count();
-        assert!(!xpbd.gas.as_ref().unwrap().has_corners_for(n));
-        xpbd.step().unwrap();
-        assert!(!xpbd.gas.as_ref().unwrap().has_corners_for(n));
-        let mut body = ball(1);
-        let n = body.vertex_count();
-        assert!(body.gas.as_ref().unwrap().has_corners_for(n));
-        body.step().unwrap();
-        let [a, b] = body.springs.ends[0];
-        body.break_edge(a, b).unwrap();
-        let n = body.vertex_count();
-        assert!(body.gas.as_ref().unwrap().has_corners_for(n));
-        body.step().unwrap();
-        assert!(body.gas.as_ref().unwrap().has_corners_for(n));
+        for integrator in [Integrator::ExplicitEuler, Integrator::SymplecticEuler] {
+            // (Substeps short enough for the explicit integrators.)
+            let settings = BodySettings { integrator, gas_amount: 200.0, substeps: 64, ..BodySettings::default() };
+            let mut body = Body::new(&mesh, &topology, settings).unwrap();
+            let n = body.vertex_count();
+            assert!(!body.gas.as_ref().unwrap().has_corners_for(n), "{integrator:?}");
+            body.step().unwrap();
+            assert!(!body.gas.as_ref().unwrap().has_corners_for(n), "{integrator:?}");
+        }
+        let xpbd = {
+            let settings = BodySettings { integrator: Integrator::Xpbd, gas_amount: 200.0, ..BodySettings::default() };
+            Body::new(&mesh, &topology, settings).unwrap()
+        };
+        for mut body in [ball(1), xpbd] {
+            let integrator = body.settings.integrator;
+            let n = body.vertex_count();
+            assert!(body.gas.as_ref().unwrap().has_corners_for(n), "{integrator:?}");
+            body.step().unwrap();
+            let [a, b] = body.springs.ends[0];
+            body.break_edge(a, b).unwrap();
+            let n = body.vertex_count();
+            assert!(body.gas.as_ref().unwrap().has_corners_for(n), "{integrator:?}");
+            body.step().unwrap();
+            assert!(body.gas.as_ref().unwrap().has_corners_for(n), "{integrator:?}");
+        }
     }
 
     /// Substeps run by a team of one member (as while another process holds a core) give the
