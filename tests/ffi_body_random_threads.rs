@@ -1,7 +1,7 @@
 //! Random sessions of calls through the C ABI on bodies large enough for their work to be shared
 //! among threads, each replayed on 1, 2 and 3 threads: the header promises that results do not
-//! depend on `threads`, and every status, every stats field but the wall-clock time, and every
-//! buffer after every call must be the same to the bit.
+//! depend on `threads`, and every status and error message, every stats field but the
+//! wall-clock time, and every buffer after every call must be the same to the bit.
 //!
 //! `results_do_not_depend_on_the_thread_count` (tests/ffi_body_api.rs) checks that promise on
 //! six fixed scenes; these sessions also crack, cut, release core blocks, pin, push and add
@@ -18,7 +18,7 @@ mod body_util;
 mod random;
 
 use body_util::*;
-use random::{Rng, count, seeds};
+use random::{Outcome, Rng, count, first_difference, seeds};
 use softshell::ffi::body::*;
 use softshell::ffi::{SoftshellBodyDef, SoftshellBodyStats, SoftshellStatus};
 
@@ -77,17 +77,6 @@ fn random_scene(rng: &mut Rng) -> (Vec<f32>, Vec<u32>, SoftshellBodyDef) {
         def.friction = rng.uniform(0.0, 1.5);
     }
     (positions, triangles, def)
-}
-
-/// One call's outcome, compared between the thread counts.
-#[derive(Debug, PartialEq)]
-struct Outcome {
-    call: String,
-    status: SoftshellStatus,
-    /// Every stats field but `step_seconds`, floats as bits (a step's only).
-    stats: Option<Vec<u64>>,
-    /// Every buffer and count, floats as bits.
-    state: Vec<u64>,
 }
 
 fn stats_bits(s: &SoftshellBodyStats) -> Vec<u64> {
@@ -217,27 +206,11 @@ fn run_session(seed: u64, actions: usize, threads: u32, tally: &mut Tally) -> Ve
                 }
             }
         };
+        let message = if status == SoftshellStatus::Ok { String::new() } else { last_error() };
         s = snapshot(&body);
-        outcomes.push(Outcome { call, status, stats, state: state_bits(&s) });
+        outcomes.push(Outcome { call, status, message, stats, state: state_bits(&s) });
     }
     outcomes
-}
-
-/// The first call whose outcome differs between `a` and `b`, described.
-fn first_difference(a: &[Outcome], b: &[Outcome]) -> Option<String> {
-    a.iter().zip(b).enumerate().find(|(_, (x, y))| x != y).map(|(k, (x, y))| {
-        let what = if x.call != y.call {
-            format!("the calls differ: {:?} against {:?}", x.call, y.call)
-        } else if x.status != y.status {
-            format!("status {:?} against {:?}", x.status, y.status)
-        } else if x.stats != y.stats {
-            format!("stats {:?} against {:?}", x.stats, y.stats)
-        } else {
-            let at = x.state.iter().zip(&y.state).position(|(p, q)| p != q);
-            format!("the state differs (lengths {} and {}, first at word {at:?})", x.state.len(), y.state.len())
-        };
-        format!("call {k} ({}): {what}", x.call)
-    })
 }
 
 #[test]

@@ -1,7 +1,10 @@
-//! Shared by the random-session tests (tests/ffi_*_random_sessions.rs): a small random number
-//! generator that gives the same sequence on every platform, and the seed and length settings
-//! read from the environment.
+//! Shared by the random-session tests (tests/ffi_*_random_sessions.rs and
+//! tests/ffi_*_random_threads.rs): a small random number generator that gives the same sequence
+//! on every platform, the seed and length settings read from the environment, and what the
+//! thread sessions compare between thread counts.
 #![allow(dead_code)]
+
+use softshell::ffi::SoftshellStatus;
 
 /// SplitMix64: small, and the same sequence on every platform.
 pub struct Rng(pub u64);
@@ -55,4 +58,38 @@ pub fn seeds(name: &str, default: std::ops::Range<u64>) -> std::ops::Range<u64> 
 /// The count in the environment variable `name`, else `default`.
 pub fn count(name: &str, default: usize) -> usize {
     std::env::var(name).ok().and_then(|n| n.parse().ok()).unwrap_or(default)
+}
+
+/// One call's outcome in a thread session, compared between the thread counts.
+#[derive(Debug, PartialEq)]
+pub struct Outcome {
+    pub call: String,
+    pub status: SoftshellStatus,
+    /// The error message of a call that did not return OK (empty after OK): an UNSTABLE step
+    /// names the value that blew up and advises settings, which must not depend on the threads
+    /// either.
+    pub message: String,
+    /// Every stats field but the wall-clock time, floats as bits (a step's only).
+    pub stats: Option<Vec<u64>>,
+    /// Every buffer and count, floats as bits.
+    pub state: Vec<u64>,
+}
+
+/// The first call whose outcome differs between `a` and `b`, described.
+pub fn first_difference(a: &[Outcome], b: &[Outcome]) -> Option<String> {
+    a.iter().zip(b).enumerate().find(|(_, (x, y))| x != y).map(|(k, (x, y))| {
+        let what = if x.call != y.call {
+            format!("the calls differ: {:?} against {:?}", x.call, y.call)
+        } else if x.status != y.status {
+            format!("status {:?} against {:?}", x.status, y.status)
+        } else if x.message != y.message {
+            format!("message {:?} against {:?}", x.message, y.message)
+        } else if x.stats != y.stats {
+            format!("stats {:?} against {:?}", x.stats, y.stats)
+        } else {
+            let at = x.state.iter().zip(&y.state).position(|(p, q)| p != q);
+            format!("the state differs (lengths {} and {}, first at word {at:?})", x.state.len(), y.state.len())
+        };
+        format!("call {k} ({}): {what}", x.call)
+    })
 }
