@@ -4,6 +4,7 @@ use glam::Vec3;
 
 use super::forces::{Model, all_forces};
 use super::gas::Gas;
+use crate::parallel::WorkerPool;
 
 /// Scratch of the explicit integrators.
 #[derive(Default)]
@@ -21,13 +22,14 @@ pub(crate) fn substep(
     v: &mut [Vec3],
     h: f32,
     symplectic: bool,
+    pool: &WorkerPool,
     s: &mut ExplicitScratch,
 ) -> f64 {
     s.force.resize(x.len(), Vec3::ZERO);
     if gas.is_some() {
         s.gradient.resize(x.len(), Vec3::ZERO);
     }
-    let power = all_forces(model, gas, x, v, &mut s.gradient, &mut s.force);
+    let power = all_forces(model, gas, pool, x, v, &mut s.gradient, &mut s.force);
     for i in 0..x.len() {
         let a = s.force[i] * model.inv_mass[i];
         if symplectic {

@@ -58,18 +58,8 @@ pub(crate) fn add_spring_forces(model: &Model, x: &[Vec3], v: &[Vec3], f: &mut [
 }
 
 /// Gas pressure forces `P_f ∂V_f/∂x_i` added to `f` (SPEC 2.1 eq. 8-9); measures the gas at `x`
-/// and leaves `∂V/∂x` in `gradient`.
-pub(crate) fn add_gas_forces(model: &Model, gas: &mut Gas, x: &[Vec3], gradient: &mut [Vec3], f: &mut [Vec3]) {
-    gas.measure_with_gradient(x, model.triangles, gradient);
-    for (i, g) in gradient.iter().enumerate() {
-        let frag = gas.vertex_fragment[i];
-        if frag != u32::MAX {
-            f[i] += *g * gas.pressure[frag as usize] as f32;
-        }
-    }
-}
-
-/// [`add_gas_forces`] with the measurement in parallel on `pool` (the same forces).
+/// on `pool` (each vertex gathers its corners' terms, in fixed chunks: the same bits on any
+/// number of threads) and leaves `∂V/∂x` in `gradient`.
 pub(crate) fn add_gas_forces_parallel(
     model: &Model,
     pool: &crate::parallel::WorkerPool,
@@ -91,6 +81,7 @@ pub(crate) fn add_gas_forces_parallel(
 pub(crate) fn all_forces(
     model: &Model,
     gas: Option<&mut Gas>,
+    pool: &crate::parallel::WorkerPool,
     x: &[Vec3],
     v: &[Vec3],
     gradient: &mut [Vec3],
@@ -99,7 +90,7 @@ pub(crate) fn all_forces(
     let power = external_forces(model, v, f);
     add_spring_forces(model, x, v, f);
     if let Some(gas) = gas {
-        add_gas_forces(model, gas, x, gradient, f);
+        add_gas_forces_parallel(model, pool, gas, x, gradient, f);
     }
     power
 }

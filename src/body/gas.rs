@@ -566,7 +566,10 @@ impl Gas {
     }
 
     /// [`Gas::measure`] and [`Gas::volume_gradient`] in one pass over the faces (the cross
-    /// products of the volume are the gradient): what each force evaluation needs.
+    /// products of the volume are the gradient), scattered into the vertices: the reference the
+    /// gathering form that every integrator uses ([`Gas::measure_with_gradient_parallel`]) is
+    /// tested against.
+    #[cfg(test)]
     pub fn measure_with_gradient(&mut self, x: &[Vec3], triangles: &[[u32; 3]], out: &mut [Vec3]) {
         out.iter_mut().for_each(|g| *g = Vec3::ZERO);
         let six_v = &mut self.volume;
@@ -677,9 +680,8 @@ impl Gas {
     }
 
     /// Makes the corner lists and rings of the gradient for the `n` vertices and `triangles`
-    /// unless they are made (only the parallel gathering of implicit Euler and XPBD uses them:
-    /// `Integrator::gathers_gas_gradient`). A new body stepped by either makes them before its
-    /// first step (on the issue-5 balloon, 10,242
+    /// unless they are made (the gathering form of the gradient uses them). A new body makes
+    /// them before its first step (on the issue-5 balloon, 10,242
     /// vertices, about 1 ms that the first step took on top of its own work); after a topology
     /// change the cracking step makes them in its fracture phase
     /// ([`Gas::prepare_corners_after_change`]), so here they are made already.

@@ -18,19 +18,6 @@ pub enum Integrator {
     Xpbd,
 }
 
-impl Integrator {
-    /// Whether it measures the gas's gradient by gathering each vertex's corners (in fixed
-    /// chunks, on the body's threads), so keeps the gas's corner lists: implicit Euler and XPBD,
-    /// which measure it once a substep and once an iteration. XPBD measured it face by face,
-    /// scattering into the vertices, on one thread: its steps on the issue-5 balloon took
-    /// 1.2-1.5 times as long (`BODY_ONLY=XPBD cargo bench --bench body_balloon`, 2 threads: 5
-    /// substeps of 2 iterations 25 ms against 20, 10 of 10 220-243 ms against 172-177). The
-    /// explicit integrators measure it face by face and keep no corner lists.
-    pub fn gathers_gas_gradient(self) -> bool {
-        matches!(self, Integrator::ImplicitEuler | Integrator::Xpbd)
-    }
-}
-
 /// The most substeps a step may take (the C ABI refuses more; the advice of an UNSTABLE step
 /// never asks for more).
 pub const MAX_SUBSTEPS: u32 = 1000;

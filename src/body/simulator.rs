@@ -10,7 +10,7 @@ use super::core_block;
 use super::crack;
 use super::energy;
 use super::explicit::{self, ExplicitScratch};
-use super::forces::{Model, add_gas_forces, add_spring_forces};
+use super::forces::{Model, add_gas_forces_parallel, add_spring_forces};
 use super::gas::Gas;
 use super::headroom::reserve_for;
 use super::implicit::{self, ImplicitScratch};
@@ -391,11 +391,13 @@ impl Body {
         let fragment_count = topology.component_count;
         let gas = (settings.gas_amount > 0.0).then(|| {
             let mut gas = Gas::new(n, &triangles, &face_fragment, fragment_count, &topology.boundary_loops);
-            // (Implicit Euler and XPBD gather the gradient by corners; the explicit integrators
-            // measure it face by face and never make them.)
-            if settings.integrator.gathers_gas_gradient() {
-                gas.prepare_corners(&triangles, n);
-            }
+            // Every integrator gathers the gradient at each vertex from its corners, in fixed
+            // chunks on the body's threads. XPBD and the explicit integrators measured it face
+            // by face, scattering into the vertices on one thread: on the issue-5 balloon
+            // (`cargo bench --bench body_balloon`, 2 threads) their steps took 1.2-1.5 times as
+            // long (XPBD with 5 substeps of 2 iterations 25 ms against 20, symplectic Euler with
+            // 40 substeps 22-25 ms against 19-21).
+            gas.prepare_corners(&triangles, n);
             gas.measure(&nodes.x, &triangles); // n_rt = 0: volumes only
             let total: f64 = gas.volume.iter().map(|v| v.max(0.0)).sum();
             for f in 0..fragment_count {
@@ -1411,7 +1413,8 @@ impl Body {
         let gas = self.gas.as_mut();
         let result = match &mut self.scratch {
             Scratch::Explicit(s) => {
-                (explicit::substep(&model, gas, x, v, h, self.settings.integrator == Integrator::SymplecticEuler, s), 0)
+                let symplectic = self.settings.integrator == Integrator::SymplecticEuler;
+                (explicit::substep(&model, gas, x, v, h, symplectic, &self.pool, s), 0)
             }
             Scratch::Implicit(s) => {
                 let max_iterations = (10 * self.settings.iterations as usize).max(40);
@@ -1495,7 +1498,7 @@ impl Body {
         if let Some(gas) = self.gas.as_mut() {
             gradient.clear();
             gradient.resize(n, Vec3::ZERO);
-            add_gas_forces(&model, gas, &self.nodes.x, gradient, f);
+            add_gas_forces_parallel(&model, &self.pool, gas, &self.nodes.x, gradient, f);
         }
     }
 
@@ -1700,7 +1703,7 @@ impl Body {
             let adjacency = self.settings.spring_adjacency();
             let (triangles, face_fragment, fragment_count) =
                 (&self.triangles, &self.face_fragment, self.fragment_count);
-            let (n, lay_out_corners) = (nodes.len(), self.settings.integrator.gathers_gas_gradient());
+            let n = nodes.len();
             // The gas's chain is the longer: first, on this thread (the other is the one a
             // worker may take, and a sleeping worker takes it late).
             let (gas, springs) = self.pool.join(
@@ -1716,13 +1719,11 @@ impl Body {
                             &topology.boundary_loops,
                         );
                         trace_phase("rebuild: gas", t);
-                        if lay_out_corners {
-                            let t = Instant::now();
-                            // Only the fans the change touched are walked again.
-                            let changed = fracture.map(|f| &f.changed[..]);
-                            gas.prepare_corners_after_change(triangles, n, changed);
-                            trace_phase("rebuild: the gas's corners", t);
-                        }
+                        let t = Instant::now();
+                        // Only the fans the change touched are walked again.
+                        let changed = fracture.map(|f| &f.changed[..]);
+                        gas.prepare_corners_after_change(triangles, n, changed);
+                        trace_phase("rebuild: the gas's corners", t);
                         gas
                     })
                 },
@@ -2160,30 +2161,20 @@ mod tests {
         }
     }
 
-    /// A body with gas stepped by implicit Euler or XPBD makes its gas's corner lists when it
-    /// is made, not in its first step (a first step that took about twice the next on the
-    /// issue-5 balloon); a topology change makes them again in its own fracture phase (it left
-    /// them to the next step, which paid that cost of the change). A body stepped by an
-    /// explicit integrator never makes them (it measures the gradient face by face).
+    /// A body with gas makes its gas's corner lists when it is made, not in its first step (a
+    /// first step that took about twice the next on the issue-5 balloon), whatever its
+    /// integrator; a topology change makes them again in its own fracture phase (it left them to
+    /// the next step, which paid that cost of the change).
     #[test]
     fn the_gas_corners_are_made_with_the_body() {
         let mesh = sphere(3);
         let topology = Topology::build(mesh.triangles(), mesh.positions().len());
-        for integrator in [Integrator::ExplicitEuler, Integrator::SymplecticEuler] {
+        let integrators =
+            [Integrator::ExplicitEuler, Integrator::SymplecticEuler, Integrator::ImplicitEuler, Integrator::Xpbd];
+        for integrator in integrators {
             // (Substeps short enough for the explicit integrators.)
             let settings = BodySettings { integrator, gas_amount: 200.0, substeps: 64, ..BodySettings::default() };
             let mut body = Body::new(&mesh, &topology, settings).unwrap();
-            let n = body.vertex_count();
-            assert!(!body.gas.as_ref().unwrap().has_corners_for(n), "{integrator:?}");
-            body.step().unwrap();
-            assert!(!body.gas.as_ref().unwrap().has_corners_for(n), "{integrator:?}");
-        }
-        let xpbd = {
-            let settings = BodySettings { integrator: Integrator::Xpbd, gas_amount: 200.0, ..BodySettings::default() };
-            Body::new(&mesh, &topology, settings).unwrap()
-        };
-        for mut body in [ball(1), xpbd] {
-            let integrator = body.settings.integrator;
             let n = body.vertex_count();
             assert!(body.gas.as_ref().unwrap().has_corners_for(n), "{integrator:?}");
             body.step().unwrap();

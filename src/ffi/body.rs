@@ -58,10 +58,10 @@ pub const SOFTSHELL_INTEGRATOR_IMPLICIT_EULER: u32 = 2;
 /// a gas ball of 10 J spun up from 0.013 to 0.14 J of kinetic energy in 1,500 steps, with or
 /// without spring damping). That costs 12 bytes a spring (and a vertex, with gas) and 2.3-2.9
 /// times the step time of textbook XPBD on the issue-5 balloon, measured when both measured the
-/// gas face by face on one thread. With gas, XPBD now gathers the volume gradient at each
-/// vertex from corner lists it keeps (12 bytes a face corner), in parallel like implicit
-/// Euler: its steps on that balloon got 1.2-1.5 times faster (5 substeps of 2 sweeps about 20
-/// ms on 2 threads).
+/// gas face by face on one thread. Every integrator now gathers the gas's volume gradient at
+/// each vertex from corner lists the body keeps (12 bytes a face corner), on the body's
+/// threads: XPBD's steps on that balloon got 1.2-1.5 times faster (5 substeps of 2 sweeps
+/// about 20 ms on 2 threads).
 pub const SOFTSHELL_INTEGRATOR_XPBD: u32 = 3;
 
 const INTEGRATORS: &str = "SOFTSHELL_INTEGRATOR_EXPLICIT_EULER (0), SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER (1), \
