@@ -66,10 +66,9 @@
 // a gas ball of 10 J spun up from 0.013 to 0.14 J of kinetic energy in 1,500 steps, with or
 // without spring damping). That costs 12 bytes a spring (and a vertex, with gas) and 2.3-2.9
 // times the step time of textbook XPBD on the issue-5 balloon, measured when both measured the
-// gas face by face on one thread. Every integrator now gathers the gas's volume gradient at
-// each vertex from corner lists the body keeps (12 bytes a face corner), on the body's
-// threads: XPBD's steps on that balloon got 1.2-1.5 times faster (5 substeps of 2 sweeps
-// about 20 ms on 2 threads).
+// gas face by face on one thread (with the gas's gradient gathered on the body's threads, see
+// `gas_amount`, XPBD's steps there got 1.2-1.6 times faster: 5 substeps of 2 sweeps about 20
+// ms on 2 threads).
 #define SOFTSHELL_INTEGRATOR_XPBD 3
 
 // Mean curvature H (1/m), for `..._copy_vertex_curvature`: positive where the surface bends away
@@ -275,7 +274,9 @@ typedef struct SoftshellBodyDef {
   float spring_damping;
   // Amount of gas nRT, J (pressure = nRT / volume), in [0, 1e12]. 0 (default) = no gas; then
   // open meshes (cloth) are allowed. With gas the mesh must be closed, manifold and outward
-  // (every connected piece).
+  // (every connected piece), and the body keeps each vertex's face corners to gather the
+  // gas's volume gradient there on its threads, whatever the integrator: about 57 bytes a
+  // face (96 with a break limit, which reserves room to crack).
   float gas_amount;
   // Gravity, m/s^2, each component in [-1e6, 1e6]. Default 0, -9.81, 0.
   float gravity[3];

@@ -112,6 +112,9 @@ struct Tally {
     impulses: usize,
     pins: usize,
     obstacles: usize,
+    /// OK steps of bodies with gas, per integrator (`SOFTSHELL_INTEGRATOR_*`): every integrator
+    /// measures the gas on the body's threads, so each must be compared with gas.
+    gas_steps_ok: [usize; 4],
 }
 
 /// Runs session `seed` with `threads` and returns each call's outcome. The calls depend only
@@ -134,6 +137,9 @@ fn run_session(seed: u64, actions: usize, threads: u32, tally: &mut Tally) -> Ve
                 match status {
                     SoftshellStatus::Ok => {
                         tally.steps_ok += 1;
+                        if def.gas_amount > 0.0 {
+                            tally.gas_steps_ok[def.integrator as usize] += 1;
+                        }
                         tally.cracking_steps += (stats.springs_broken + stats.cores_released > 0) as usize;
                     }
                     SoftshellStatus::Unstable => tally.steps_unstable += 1,
@@ -213,9 +219,12 @@ fn run_session(seed: u64, actions: usize, threads: u32, tally: &mut Tally) -> Ve
     outcomes
 }
 
+/// The seeds CI runs: among them every integrator steps a body with gas (asserted).
+const DEFAULT_SEEDS: std::ops::Range<u64> = 0..6;
+
 #[test]
 fn random_sessions_give_the_same_bits_on_every_thread_count() {
-    let seeds = seeds("SOFTSHELL_THREAD_SESSIONS", 0..6u64);
+    let seeds = seeds("SOFTSHELL_THREAD_SESSIONS", DEFAULT_SEEDS);
     let actions = count("SOFTSHELL_THREAD_ACTIONS", 24);
     let mut tally = Tally::default();
     let mut failures = Vec::new();
@@ -234,4 +243,7 @@ fn random_sessions_give_the_same_bits_on_every_thread_count() {
     let sessions = (seeds.end - seeds.start) as usize;
     assert!(tally.steps_ok >= sessions * actions / 4, "{tally:?}");
     assert!(tally.cuts_ok > 0 && tally.impulses > 0, "{tally:?}");
+    if seeds == DEFAULT_SEEDS {
+        assert!(tally.gas_steps_ok.iter().all(|&k| k > 0), "an integrator not stepped with gas: {tally:?}");
+    }
 }

@@ -1,5 +1,6 @@
 //! The force loop (SPEC 2.1, 2.5): gravity, springs with damping, gas pressure and wind, summed
-//! per vertex. Serial scatter in a fixed order, so the sum is the same whatever the thread count.
+//! per vertex. The springs in a serial scatter in a fixed order, the gas's gradient gathered per
+//! vertex in fixed chunks: the sums are the same whatever the thread count.
 
 use glam::Vec3;
 

@@ -73,9 +73,9 @@ pub(crate) struct Gas {
     /// True when the last measurement clamped a volume (near-zero or inverted fragment).
     pub clamped: bool,
     /// The triangle corners at each vertex in CSR form (each corner's next and previous vertex
-    /// and its face's fragment, faces ascending), made with the body and after each topology
-    /// change for the implicit integrator ([`Gas::prepare_corners`]): lets the parallel
-    /// measurement gather per vertex instead of scattering.
+    /// and its face's fragment, faces ascending), made with every body with gas and after each
+    /// topology change ([`Gas::prepare_corners`]): lets the parallel measurement gather per
+    /// vertex instead of scattering.
     corner_offsets: Vec<u32>,
     corners: Vec<Corner>,
     /// Per vertex: its corners close a ring around it (every neighbour is once the next and once
@@ -647,9 +647,11 @@ impl Gas {
     }
 
     /// [`Gas::measure_with_gradient`] in parallel chunks: each vertex gathers the gradient terms
-    /// of its corners (in face order, so the gradient is the same to the bit as the scattering
-    /// form's), and the volume is summed over fixed chunks of faces. The volume sums differ
-    /// from the serial form's in rounding only.
+    /// of its corners (in face order; about the vertex itself in f32 on closed fans, so the
+    /// gradient differs from the scattering form's in rounding there, and is the same to the
+    /// bit elsewhere), and the volume is summed over fixed chunks of faces (the sums differ
+    /// from the serial form's in rounding only). Fixed chunks: the same bits on any number of
+    /// threads.
     pub fn measure_with_gradient_parallel(
         &mut self,
         pool: &WorkerPool,
@@ -830,6 +832,9 @@ impl Gas {
 
     /// The corners at each vertex (CSR, faces ascending).
     fn build_corners(&mut self, triangles: &[[u32; 3]], n: usize, changed: Option<&[bool]>) {
+        // The count runs over the triangles and the writes over them zipped with their
+        // fragments: of different lengths, slots kept from the old buffer would stay unwritten.
+        debug_assert_eq!(triangles.len(), self.face_fragment.len());
         // Each vertex's corners in face order: a count, then one pass over the faces writing
         // each corner in its place (a list of corner numbers first, then a pass reading the
         // faces again for each, took 1.0 ms against 0.65 ms on a 16k-vertex sphere). A topology
@@ -1231,8 +1236,8 @@ mod tests {
     }
 
     /// The room reserved for a body that may crack is for corner lists and rings that were
-    /// made: a gas whose body never makes them (XPBD, explicit integrators) gets none (it held
-    /// spare ring buffers, found by review).
+    /// made: a gas without them gets none (it held spare ring buffers, found by review; every
+    /// body with gas now makes them, but the reservation still follows what exists).
     #[test]
     fn a_gas_without_corners_reserves_no_room_for_them() {
         let (_, t) = tetra();

@@ -394,9 +394,11 @@ impl Body {
             // Every integrator gathers the gradient at each vertex from its corners, in fixed
             // chunks on the body's threads. XPBD and the explicit integrators measured it face
             // by face, scattering into the vertices on one thread: on the issue-5 balloon
-            // (`cargo bench --bench body_balloon`, 2 threads) their steps took 1.2-1.5 times as
-            // long (XPBD with 5 substeps of 2 iterations 25 ms against 20, symplectic Euler with
-            // 40 substeps 22-25 ms against 19-21).
+            // (`BODY_ONLY=XPBD` and `BODY_ONLY=symplectic cargo bench --bench body_balloon --
+            // quick`, 2 threads, old and new in turn) XPBD's steps took 1.2-1.6 times as long (5
+            // substeps of 2 iterations 24.6-25.1 ms against 20.0-20.3; 10 of 10 220-243 against
+            // 172-177) and symplectic Euler's with 40 substeps 1.1-1.3 times (22.4-24.7 against
+            // 19.3-20.6).
             gas.prepare_corners(&triangles, n);
             gas.measure(&nodes.x, &triangles); // n_rt = 0: volumes only
             let total: f64 = gas.volume.iter().map(|v| v.max(0.0)).sum();
@@ -1689,8 +1691,8 @@ impl Body {
         let old_gas = self.gas.take();
         // The springs and the gas do not depend on each other: built at the same time (about
         // 0.6 ms each on the issue-5 balloon's first cracking step), each followed by what the
-        // implicit integrator makes from it for its substeps: the coupling layout of the
-        // springs and the gas's corner lists (each a pass over all of them). Left to the next
+        // substeps make from it: the implicit integrator's coupling layout of the springs, and
+        // the gas's corner lists (each a pass over all of them). Left to the next
         // substep, those two were a cost of the change that the step after it paid, on one
         // thread, before its solve (0.8-2.5 ms on the issue-5 balloon after a cut, on a busy
         // machine), and that the benchmarks, which time the step that cracks, did not see.

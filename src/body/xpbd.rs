@@ -156,9 +156,11 @@ const GAS_TURN: f32 = 0.5;
 #[inline(always)]
 fn reaim(target: Vec3, push: &mut Vec3, fraction: f32, limit: f32) -> Vec3 {
     let mut turn = (target - *push) * fraction;
-    // Squared lengths compared (a square root only for a turn that is cut short).
+    // Squared lengths compared (a square root only for a turn that is cut short). A turn whose
+    // square overflows is cut to nothing (limit / ∞), as when lengths were compared, also where
+    // the limit's own square overflows (a limit over 1.8e19: only in a blow-up).
     let squared = turn.length_squared();
-    if squared > limit * limit {
+    if squared > limit * limit || (squared == f32::INFINITY && limit < f32::INFINITY) {
         turn *= limit / squared.sqrt();
     }
     if !turn.is_finite() {
