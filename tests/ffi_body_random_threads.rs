@@ -13,6 +13,7 @@
 //!
 //! CI runs a few sessions; `SOFTSHELL_THREAD_SESSIONS=<first>..<end>` runs other seeds and
 //! `SOFTSHELL_THREAD_ACTIONS=<n>` sets the calls a session makes.
+#![cfg(feature = "body")]
 
 mod body_util;
 mod random;
