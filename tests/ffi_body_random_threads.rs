@@ -19,7 +19,7 @@ mod body_util;
 mod random;
 
 use body_util::*;
-use random::{Outcome, Rng, count, first_difference, seeds};
+use random::{Outcome, Rng, count, replay_on_threads, seeds};
 use softshell::ffi::body::*;
 use softshell::ffi::{SoftshellBodyDef, SoftshellBodyStats, SoftshellStatus};
 
@@ -228,16 +228,8 @@ fn random_sessions_give_the_same_bits_on_every_thread_count() {
     let seeds = seeds("SOFTSHELL_THREAD_SESSIONS", DEFAULT_SEEDS);
     let actions = count("SOFTSHELL_THREAD_ACTIONS", 24);
     let mut tally = Tally::default();
-    let mut failures = Vec::new();
-    for seed in seeds.clone() {
-        let one = run_session(seed, actions, 1, &mut tally);
-        for threads in [2, 3] {
-            let other = run_session(seed, actions, threads, &mut Tally::default());
-            if let Some(d) = first_difference(&one, &other) {
-                failures.push(format!("seed {seed}, 1 thread against {threads}: {d}"));
-            }
-        }
-    }
+    let failures =
+        replay_on_threads(seeds.clone(), &mut tally, |seed, threads, tally| run_session(seed, actions, threads, tally));
     eprintln!("thread sessions {seeds:?}, {actions} calls each: {tally:?}");
     assert!(failures.is_empty(), "results depend on the thread count:\n{}", failures.join("\n"));
     // The sessions did what they are for.

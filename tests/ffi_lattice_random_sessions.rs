@@ -61,17 +61,7 @@ fn random_def(rng: &mut Rng) -> SoftshellLatticeDef {
     d
 }
 
-type Copy = unsafe extern "C" fn(*const SoftshellLattice, *mut f32, usize, *mut usize) -> SoftshellStatus;
-
-fn copied(lattice: *mut SoftshellLattice, copy: Copy) -> Vec<f32> {
-    let mut len = 0usize;
-    // SAFETY: live lattice; a NULL buffer asks for the size.
-    assert_eq!(unsafe { copy(lattice, null_mut(), 0, &mut len) }, SoftshellStatus::BufferTooSmall);
-    let mut out = vec![0.0f32; len];
-    // SAFETY: `out` holds `len` floats.
-    assert_eq!(unsafe { copy(lattice, out.as_mut_ptr(), len, &mut len) }, SoftshellStatus::Ok, "{}", last_error());
-    out
-}
+type Copy = CopyFloats<SoftshellLattice>;
 
 /// Positions, velocities and goals, as bits.
 fn state(lattice: *mut SoftshellLattice) -> Vec<u32> {

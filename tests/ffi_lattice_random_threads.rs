@@ -23,7 +23,7 @@ mod random;
 use std::ptr::null_mut;
 
 use common::*;
-use random::{Outcome, Rng, count, first_difference, seeds};
+use random::{Outcome, Rng, count, replay_on_threads, seeds};
 use softshell::ffi::SoftshellStatus;
 use softshell::ffi::lattice::*;
 
@@ -87,17 +87,7 @@ fn random_mask(rng: &mut Rng, columns: u32, rows: u32) -> Option<Vec<u8>> {
     Some(m)
 }
 
-type Copy = unsafe extern "C" fn(*const SoftshellLattice, *mut f32, usize, *mut usize) -> SoftshellStatus;
-
-fn copied(lattice: *mut SoftshellLattice, copy: Copy) -> Vec<f32> {
-    let mut len = 0usize;
-    // SAFETY: live lattice; a NULL buffer asks for the size.
-    assert_eq!(unsafe { copy(lattice, null_mut(), 0, &mut len) }, SoftshellStatus::BufferTooSmall);
-    let mut out = vec![0.0f32; len];
-    // SAFETY: `out` holds `len` floats.
-    assert_eq!(unsafe { copy(lattice, out.as_mut_ptr(), len, &mut len) }, SoftshellStatus::Ok, "{}", last_error());
-    out
-}
+type Copy = CopyFloats<SoftshellLattice>;
 
 /// Positions, velocities and goals, floats as bits.
 fn state_bits(lattice: *mut SoftshellLattice) -> Vec<u64> {
@@ -248,16 +238,8 @@ fn random_lattice_sessions_give_the_same_bits_on_every_thread_count() {
     let seeds = seeds("SOFTSHELL_LATTICE_THREAD_SESSIONS", 0..32u64);
     let actions = count("SOFTSHELL_LATTICE_THREAD_ACTIONS", 40);
     let mut tally = Tally::default();
-    let mut failures = Vec::new();
-    for seed in seeds.clone() {
-        let one = run_session(seed, actions, 1, &mut tally);
-        for threads in [2, 3] {
-            let other = run_session(seed, actions, threads, &mut Tally::default());
-            if let Some(d) = first_difference(&one, &other) {
-                failures.push(format!("seed {seed}, 1 thread against {threads}: {d}"));
-            }
-        }
-    }
+    let failures =
+        replay_on_threads(seeds.clone(), &mut tally, |seed, threads, tally| run_session(seed, actions, threads, tally));
     eprintln!("lattice thread sessions {seeds:?}, {actions} calls each: {tally:?}");
     assert!(failures.is_empty(), "results depend on the thread count:\n{}", failures.join("\n"));
     // The sessions did what they are for.

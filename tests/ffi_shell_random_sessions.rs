@@ -93,18 +93,6 @@ fn positions(shell: *mut SoftshellShell) -> Vec<f32> {
     out
 }
 
-type Copy = unsafe extern "C" fn(*const SoftshellShell, *mut f32, usize, *mut usize) -> SoftshellStatus;
-
-fn copied(shell: *mut SoftshellShell, copy: Copy) -> Vec<f32> {
-    let mut len = 0usize;
-    // SAFETY: live shell; a NULL buffer asks for the size.
-    assert_eq!(unsafe { copy(shell, null_mut(), 0, &mut len) }, SoftshellStatus::BufferTooSmall);
-    let mut out = vec![0.0f32; len];
-    // SAFETY: `out` holds `len` floats.
-    assert_eq!(unsafe { copy(shell, out.as_mut_ptr(), len, &mut len) }, SoftshellStatus::Ok, "{}", last_error());
-    out
-}
-
 fn finite_stats(s: &SoftshellShellStats) -> bool {
     [
         s.time,

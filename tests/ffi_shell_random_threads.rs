@@ -25,7 +25,7 @@ mod random;
 use std::ptr::null_mut;
 
 use common::*;
-use random::{Outcome, Rng, count, first_difference, seeds};
+use random::{Outcome, Rng, count, replay_on_threads, seeds};
 use softshell::ffi::SoftshellStatus;
 use softshell::ffi::mesh::*;
 use softshell::ffi::shell::*;
@@ -74,18 +74,6 @@ fn random_def(rng: &mut Rng) -> SoftshellShellDef {
         _ => {}
     }
     d
-}
-
-type Copy = unsafe extern "C" fn(*const SoftshellShell, *mut f32, usize, *mut usize) -> SoftshellStatus;
-
-fn copied(shell: *mut SoftshellShell, copy: Copy) -> Vec<f32> {
-    let mut len = 0usize;
-    // SAFETY: live shell; a NULL buffer asks for the size.
-    assert_eq!(unsafe { copy(shell, null_mut(), 0, &mut len) }, SoftshellStatus::BufferTooSmall);
-    let mut out = vec![0.0f32; len];
-    // SAFETY: `out` holds `len` floats.
-    assert_eq!(unsafe { copy(shell, out.as_mut_ptr(), len, &mut len) }, SoftshellStatus::Ok, "{}", last_error());
-    out
 }
 
 fn curvature(shell: *mut SoftshellShell, kind: u32) -> Vec<f32> {
@@ -240,16 +228,8 @@ fn random_shell_sessions_give_the_same_bits_on_every_thread_count() {
     let seeds = seeds("SOFTSHELL_SHELL_THREAD_SESSIONS", 0..6u64);
     let actions = count("SOFTSHELL_SHELL_THREAD_ACTIONS", 12);
     let mut tally = Tally::default();
-    let mut failures = Vec::new();
-    for seed in seeds.clone() {
-        let one = run_session(seed, actions, 1, &mut tally);
-        for threads in [2, 3] {
-            let other = run_session(seed, actions, threads, &mut Tally::default());
-            if let Some(d) = first_difference(&one, &other) {
-                failures.push(format!("seed {seed}, 1 thread against {threads}: {d}"));
-            }
-        }
-    }
+    let failures =
+        replay_on_threads(seeds.clone(), &mut tally, |seed, threads, tally| run_session(seed, actions, threads, tally));
     eprintln!("shell thread sessions {seeds:?}, {actions} calls each: {tally:?}");
     assert!(failures.is_empty(), "results depend on the thread count:\n{}", failures.join("\n"));
     // The sessions did what they are for.

@@ -107,3 +107,17 @@ pub fn header_version() -> (u32, u32, u32) {
 pub fn abi_version() -> u32 {
     softshell_abi_version()
 }
+
+/// A `softshell_*_copy_*` function of float buffers, for any handle type.
+pub type CopyFloats<H> = unsafe extern "C" fn(*const H, *mut f32, usize, *mut usize) -> SoftshellStatus;
+
+/// A whole float buffer of `handle` by `copy`: its size asked with NULL, then copied.
+pub fn copied<H>(handle: *mut H, copy: CopyFloats<H>) -> Vec<f32> {
+    let mut len = 0usize;
+    // SAFETY: the caller's live handle; a NULL buffer asks for the size.
+    assert_eq!(unsafe { copy(handle, std::ptr::null_mut(), 0, &mut len) }, SoftshellStatus::BufferTooSmall);
+    let mut out = vec![0.0f32; len];
+    // SAFETY: `out` holds `len` floats.
+    assert_eq!(unsafe { copy(handle, out.as_mut_ptr(), len, &mut len) }, SoftshellStatus::Ok, "{}", last_error());
+    out
+}

@@ -93,3 +93,25 @@ pub fn first_difference(a: &[Outcome], b: &[Outcome]) -> Option<String> {
         format!("call {k} ({}): {what}", x.call)
     })
 }
+
+/// Runs each session of `seeds` on 1 thread, then again on 2 and on 3, and returns the
+/// differences found, one line each (none: the same bits on every thread count). `run(seed,
+/// threads, tally)` runs one session and returns its outcomes; `tally` counts what the 1-thread
+/// runs did (the others make the same calls while the outcomes agree).
+pub fn replay_on_threads<T: Default>(
+    seeds: std::ops::Range<u64>,
+    tally: &mut T,
+    mut run: impl FnMut(u64, u32, &mut T) -> Vec<Outcome>,
+) -> Vec<String> {
+    let mut failures = Vec::new();
+    for seed in seeds {
+        let one = run(seed, 1, tally);
+        for threads in [2, 3] {
+            let other = run(seed, threads, &mut T::default());
+            if let Some(d) = first_difference(&one, &other) {
+                failures.push(format!("seed {seed}, 1 thread against {threads}: {d}"));
+            }
+        }
+    }
+    failures
+}
