@@ -171,6 +171,42 @@ fn a_plain_body_holds_its_state_and_its_integrators_vectors_only() {
     }
 }
 
+/// Gas costs a body what it needs and not much more, with every integrator: per face its
+/// three corners (the next and previous vertex and the fragment, 12 bytes each: every
+/// integrator gathers the gas's gradient at each vertex from them) and its fragment (4); per
+/// vertex its fragment, the corner offsets, whether its fan is closed and the ring of its
+/// neighbours that the gathering walks (about six, with their offsets and slices: 56 bytes in
+/// all), and the integrator's own per-vertex gas vectors once it has stepped (the gradient, 12
+/// bytes; XPBD also each vertex's gas push, 12 more). A budget, not today's figure: a second
+/// copy of the corners, a per-face gradient or fracture buffers made for gas break it.
+#[test]
+fn gas_holds_its_fragments_corners_and_rings_only() {
+    let (p, t) = unit_obj("sphere.obj", 1.0);
+    let (n, faces) = (p.len() / 3, t.len() / 3);
+    for (integrator, per_vertex_vectors) in [
+        (SOFTSHELL_INTEGRATOR_EXPLICIT_EULER, 12),
+        (SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER, 12),
+        (SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, 12),
+        (SOFTSHELL_INTEGRATOR_XPBD, 24),
+    ] {
+        // Short substeps, so that the explicit integrators' steps go through.
+        let def = SoftshellBodyDef { integrator, spring_stiffness: 10.0, substeps: 100, ..body_def() };
+        let plain = Body::new(&p, &t, &def).unwrap();
+        let gas = Body::new(&p, &t, &SoftshellBodyDef { gas_amount: 0.01, ..def }).unwrap();
+        plain.step().unwrap();
+        gas.step().unwrap();
+        let (without, with) = (plain.memory(), gas.memory());
+        let budget = 40 * faces + (56 + per_vertex_vectors) * n + 1024;
+        println!("integrator {integrator}: gas adds {} bytes, budget {budget}", with - without);
+        assert!(with > without, "integrator {integrator}: gas holds nothing?");
+        assert!(
+            with - without <= budget,
+            "integrator {integrator}: gas adds {} bytes against a budget of {budget}",
+            with - without
+        );
+    }
+}
+
 #[test]
 fn lattice_without_damping_pins_forces_or_pool_holds_none() {
     let def = SoftshellLatticeDef { columns: 48, rows: 48, ..softshell_lattice_def_default() };
