@@ -689,17 +689,25 @@ impl Gas {
     /// ([`Gas::prepare_corners_after_change`]), so here they are made already.
     pub fn prepare_corners(&mut self, triangles: &[[u32; 3]], n: usize) {
         if self.corner_offsets.len() != n + 1 {
-            self.build_corners(triangles, n, None);
+            self.build_corners(triangles, n, None, None);
         }
     }
 
     /// [`Gas::prepare_corners`] right after [`Gas::after_change`], whose rings are still those
     /// of the mesh before the change: with `changed` (per vertex, whether the change touched
     /// its fan: `Fracture::changed`) only the touched fans' rings are made again
-    /// ([`FanRings::rebuild_keeping`]).
-    pub fn prepare_corners_after_change(&mut self, triangles: &[[u32; 3]], n: usize, changed: Option<&[bool]>) {
+    /// ([`FanRings::rebuild_keeping`]); with `fans`, the faces around each vertex from the
+    /// topology of `triangles` (`vertex_face_offsets`, `vertex_faces`), the corners are read
+    /// from those ([`Gas::corners_from_fans`]).
+    pub fn prepare_corners_after_change(
+        &mut self,
+        triangles: &[[u32; 3]],
+        n: usize,
+        changed: Option<&[bool]>,
+        fans: Option<(&[u32], &[u32])>,
+    ) {
         if self.corner_offsets.len() != n + 1 {
-            self.build_corners(triangles, n, changed);
+            self.build_corners(triangles, n, changed, fans);
         }
     }
 
@@ -824,22 +832,53 @@ impl Gas {
     #[cfg(test)]
     pub fn corners_are_a_new_build(&self, triangles: &[[u32; 3]], n: usize) -> bool {
         let mut fresh = Gas { corner_offsets: Vec::new(), rings: FanRings::default(), ..self.clone() };
-        fresh.build_corners(triangles, n, None);
+        fresh.build_corners(triangles, n, None, None);
         format!("{:?}", (&fresh.corner_offsets, &fresh.corners, &fresh.closed_fan, &fresh.slice_fragment))
             == format!("{:?}", (&self.corner_offsets, &self.corners, &self.closed_fan, &self.slice_fragment))
             && fresh.rings.same_rings(&self.rings)
     }
 
-    /// The corners at each vertex (CSR, faces ascending).
-    fn build_corners(&mut self, triangles: &[[u32; 3]], n: usize, changed: Option<&[bool]>) {
-        // The count runs over the triangles and the writes over them zipped with their
-        // fragments: of different lengths, slots kept from the old buffer would stay unwritten.
-        debug_assert_eq!(triangles.len(), self.face_fragment.len());
-        // Each vertex's corners in face order: a count, then one pass over the faces writing
-        // each corner in its place (a list of corner numbers first, then a pass reading the
-        // faces again for each, took 1.0 ms against 0.65 ms on a 16k-vertex sphere). A topology
-        // change makes these again for the whole mesh in its fracture phase.
-        let mut offsets = std::mem::take(&mut self.corner_offsets);
+    /// The corners of `triangles` into `offsets` and `corners` (CSR, faces ascending at each
+    /// vertex), read vertex by vertex from the fans `(offsets, faces)` of a topology of the
+    /// same triangles whose faces all have three distinct corners.
+    ///
+    /// Why, after a topology change: its fracture phase finds the corner lists cold in the
+    /// cache (the whole surface was read and written since), where [`Gas::scatter_corners`]
+    /// writes them at random (each vertex's next slot); this writes them in order and reads the
+    /// triangles at random instead, which the processor overlaps. On the issue-5 balloon's
+    /// first crack (tests/ probe, 2 threads, 7 runs each way) the pass took 0.21-0.27 ms against
+    /// 0.40-0.53 ms, in the longer of the fracture phase's two parallel rebuilds. A one-thread
+    /// callgrind count, which sees no cache, had found it dearer (4.6M against 3.8M
+    /// instructions): kept for the body's creation, where there is no topology to read.
+    fn corners_from_fans(
+        &self,
+        triangles: &[[u32; 3]],
+        (fan_offsets, fan_faces): (&[u32], &[u32]),
+        offsets: &mut Vec<u32>,
+        corners: &mut Vec<Corner>,
+    ) {
+        offsets.clear();
+        offsets.extend_from_slice(fan_offsets);
+        corners.clear();
+        for (v, range) in fan_offsets.windows(2).enumerate() {
+            let v = v as u32;
+            corners.extend(fan_faces[range[0] as usize..range[1] as usize].iter().map(|&f| {
+                let t = triangles[f as usize];
+                let (next, prev) = match () {
+                    _ if t[0] == v => (t[1], t[2]),
+                    _ if t[1] == v => (t[2], t[0]),
+                    _ => (t[0], t[1]),
+                };
+                Corner { next, prev, fragment: self.face_fragment[f as usize] }
+            }));
+        }
+    }
+
+    /// The corners of `triangles` over `n` vertices into `offsets` and `corners` (CSR, faces
+    /// ascending at each vertex): a count, then one pass over the faces writing each corner in
+    /// its place (a list of corner numbers first, then a pass reading the faces again for each,
+    /// took 1.0 ms against 0.65 ms on a 16k-vertex sphere).
+    fn scatter_corners(&self, triangles: &[[u32; 3]], n: usize, offsets: &mut Vec<u32>, corners: &mut Vec<Corner>) {
         offsets.clear();
         offsets.resize(n + 1, 0);
         for t in triangles {
@@ -851,10 +890,11 @@ impl Gas {
             offsets[v + 1] += offsets[v];
         }
         let mut cursor = offsets[..n].to_vec();
-        let mut corners = std::mem::take(&mut self.corners);
         // Every slot is written below: only slots beyond the old length are filled first (a
         // clear then a fill wrote the issue-5 balloon's 0.7 MB of corners twice in each
-        // fracture phase).
+        // fracture phase). The count runs over the triangles and the writes over them zipped
+        // with their fragments: of different lengths, slots kept from the old buffer would stay
+        // unwritten (the caller asserts they match).
         corners.truncate(offsets[n] as usize);
         corners.resize(offsets[n] as usize, Corner { next: 0, prev: 0, fragment: 0 });
         for (t, &fragment) in triangles.iter().zip(&self.face_fragment) {
@@ -863,6 +903,29 @@ impl Gas {
                 corners[*slot as usize] = Corner { next: t[(c + 1) % 3], prev: t[(c + 2) % 3], fragment };
                 *slot += 1;
             }
+        }
+    }
+
+    /// The corners at each vertex (CSR, faces ascending); with `fans`, the faces around each
+    /// vertex of the current triangles (a topology's `vertex_face_offsets` and `vertex_faces`),
+    /// read from those in vertex order ([`Gas::corners_from_fans`]).
+    fn build_corners(
+        &mut self,
+        triangles: &[[u32; 3]],
+        n: usize,
+        changed: Option<&[bool]>,
+        fans: Option<(&[u32], &[u32])>,
+    ) {
+        debug_assert_eq!(triangles.len(), self.face_fragment.len());
+        let mut offsets = std::mem::take(&mut self.corner_offsets);
+        let mut corners = std::mem::take(&mut self.corners);
+        // A face with a repeated corner is once in each of its vertices' fans but has three
+        // corners: then the fans do not list every corner, and the corners are scattered.
+        match fans
+            .filter(|(fan_offsets, fan_faces)| fan_offsets.len() == n + 1 && fan_faces.len() == 3 * triangles.len())
+        {
+            Some(fans) => self.corners_from_fans(triangles, fans, &mut offsets, &mut corners),
+            None => self.scatter_corners(triangles, n, &mut offsets, &mut corners),
         }
         self.corner_offsets = offsets;
         self.corners = corners;
@@ -1232,6 +1295,47 @@ mod tests {
             // Vertex 0 closes two rings (one per tetrahedron), 1-3 none, 4-6 one each.
             assert_eq!(gas.rings.is_ring(v as usize), v >= 4, "vertex {v}");
             assert_eq!(closed, v == 0 || v >= 4, "vertex {v}");
+        }
+    }
+
+    /// The corners read from a topology's fans are those scattered from the faces, slot for
+    /// slot, with each face's fragment: on two tetrahedra meeting at a vertex (one open, two
+    /// fragments, faces out of vertex order); and with a face whose corner repeats (its fans
+    /// then miss a corner), the corners are scattered instead, as a new build makes them.
+    #[test]
+    fn corners_from_fans_are_the_scattered_corners() {
+        let (_, a) = tetra();
+        let b: Vec<[u32; 3]> = a.iter().map(|f| f.map(|v| if v == 0 { 0 } else { v + 3 })).collect();
+        let mut t: Vec<[u32; 3]> = b.iter().chain(&a).copied().filter(|f| *f != [1, 2, 3]).collect();
+        let n = 7;
+        let fragments: Vec<u32> = (0..t.len() as u32).map(|f| u32::from(f >= 4)).collect();
+        let scattered = |t: &[[u32; 3]], fragments: &[u32]| {
+            let mut gas = Gas::new(n, t, fragments, 2, &[]);
+            gas.prepare_corners(t, n);
+            gas
+        };
+        let debug =
+            |gas: &Gas| format!("{:?}", (&gas.corner_offsets, &gas.corners, &gas.closed_fan, &gas.slice_fragment));
+        for degenerate in [false, true] {
+            if degenerate {
+                t.push([4, 5, 4]);
+            }
+            let fragments: Vec<u32> = fragments.iter().copied().chain(degenerate.then_some(0)).collect();
+            let topology = crate::mesh::Topology::build(&t, n);
+            assert_eq!(topology.vertex_faces.len() == 3 * t.len(), !degenerate);
+            let mut from_fans = Gas::new(n, &t, &fragments, 2, &[]);
+            from_fans.prepare_corners_after_change(
+                &t,
+                n,
+                None,
+                Some((&topology.vertex_face_offsets, &topology.vertex_faces)),
+            );
+            let reference = scattered(&t, &fragments);
+            assert_eq!(debug(&from_fans), debug(&reference), "degenerate face: {degenerate}");
+            assert!(from_fans.rings.same_rings(&reference.rings));
+            assert!(
+                from_fans.corners.iter().any(|c| c.fragment == 1) && from_fans.corners.iter().any(|c| c.fragment == 0)
+            );
         }
     }
 

@@ -1724,7 +1724,8 @@ impl Body {
                         let t = Instant::now();
                         // Only the fans the change touched are walked again.
                         let changed = fracture.map(|f| &f.changed[..]);
-                        gas.prepare_corners_after_change(triangles, n, changed);
+                        let fans = (&topology.vertex_face_offsets[..], &topology.vertex_faces[..]);
+                        gas.prepare_corners_after_change(triangles, n, changed, Some(fans));
                         trace_phase("rebuild: the gas's corners", t);
                         gas
                     })
