@@ -912,27 +912,32 @@ impl Body {
         }
     }
 
-    /// For an UNSTABLE message: a note when the body lies so far from the origin that its f32
-    /// positions cannot resolve its motion (a step of the positions there, one unit in the last
-    /// place, over a thousandth of its shortest spring), else nothing. There a falling body's
-    /// first step moves it by less than one such step, gravity releases no energy the step's
-    /// tests can see, and no time step helps (a 0.5 m ball 1e5 m up was UNSTABLE at its first
-    /// step, advised more substeps, found by review).
-    fn precision_advice(&self) -> String {
+    /// For an UNSTABLE message whose step took substeps of `h`: a note when the body lies so far
+    /// from the origin that its f32 positions cannot resolve its motion, else nothing: where a
+    /// step of the positions there (one unit in the last place) is over a thousandth of its
+    /// shortest spring, or over the distance gravity moves a body at rest in one substep
+    /// (`|g| h²`). There a falling body's first step moves it by less than one such step,
+    /// gravity releases no energy the step's tests can see, and no time step helps (a 0.5 m ball
+    /// 1e5 m up was UNSTABLE at its first step, advised more substeps, found by review; a ball
+    /// of radius 1e15 m, whose springs are long enough for the first test, got the same advice).
+    fn precision_advice(&self, h: f64) -> String {
         let farthest = self.nodes.x.iter().map(|x| x.abs().max_element()).fold(0.0f32, f32::max);
         let shortest = self.springs.rest.iter().copied().filter(|&l| l > 0.0).fold(f32::INFINITY, f32::min);
         if !farthest.is_finite() || !shortest.is_finite() {
             return String::new();
         }
         let place = f32::from_bits(farthest.to_bits() + 1) - farthest;
-        if place <= 1e-3 * shortest {
+        let fall = self.settings.gravity.length() as f64 * h * h;
+        if place <= 1e-3 * shortest && place as f64 <= fall {
             return String::new();
         }
         format!(
             "; note: the body lies {farthest:.3e} m from the origin, where f32 positions move in steps of {place:.1e} \
-             m, {:.1e} of its shortest spring ({shortest:.3e} m): its motion is not resolved there at any time \
-             step; simulate it near the origin (translate the scene, or give the body its own origin)",
-            place / shortest
+             m, {:.1e} of its shortest spring ({shortest:.3e} m) and {:.1e} times what gravity moves it in a substep \
+             ({fall:.1e} m): its motion is not resolved there, and shorter substeps move it less; simulate it near \
+             the origin (translate the scene, or give the body its own origin)",
+            place / shortest,
+            place as f64 / fall
         )
     }
 
@@ -990,7 +995,7 @@ impl Body {
         } else {
             "reduce time_step or use SOFTSHELL_INTEGRATOR_IMPLICIT_EULER".to_owned()
         };
-        let advice = advice + &self.precision_advice();
+        let advice = advice + &self.precision_advice(h);
         Error::new(
             ErrorKind::Unstable,
             format!(
