@@ -915,8 +915,9 @@ impl Body {
     /// For an UNSTABLE message whose step took substeps of `h`: a note when the body lies so far
     /// from the origin that its f32 positions cannot resolve its motion, else nothing: where a
     /// step of the positions there (one unit in the last place) is over a thousandth of its
-    /// shortest spring, or over the distance gravity moves a body at rest in one substep
-    /// (`|g| h²`). There a falling body's first step moves it by less than one such step,
+    /// shortest spring, or over the body's motion in one substep (the larger of what gravity
+    /// moves a body at rest, `|g| h²`, and its fastest vertex's `|v| h`; none when both are
+    /// zero). There a falling body's first step moves it by less than one such step,
     /// gravity releases no energy the step's tests can see, and no time step helps (a 0.5 m ball
     /// 1e5 m up was UNSTABLE at its first step, advised more substeps, found by review; a ball
     /// of radius 1e15 m, whose springs are long enough for the first test, got the same advice).
@@ -927,17 +928,27 @@ impl Body {
             return String::new();
         }
         let place = f32::from_bits(farthest.to_bits() + 1) - farthest;
-        let fall = self.settings.gravity.length() as f64 * h * h;
-        if place <= 1e-3 * shortest && place as f64 <= fall {
+        let fastest = self.nodes.v.iter().map(|v| v.length()).fold(0.0f32, f32::max) as f64;
+        let motion = (self.settings.gravity.length() as f64 * h * h).max(fastest * h);
+        let unresolved_motion = motion > 0.0 && place as f64 > motion;
+        if place <= 1e-3 * shortest && !unresolved_motion {
             return String::new();
         }
+        let against_motion = if motion > 0.0 && motion.is_finite() {
+            format!(
+                " and {:.1e} times its motion in a substep ({motion:.1e} m: gravity's |g| h^2 or its fastest vertex's \
+                 |v| h)",
+                place as f64 / motion
+            )
+        } else {
+            String::new()
+        };
         format!(
             "; note: the body lies {farthest:.3e} m from the origin, where f32 positions move in steps of {place:.1e} \
-             m, {:.1e} of its shortest spring ({shortest:.3e} m) and {:.1e} times what gravity moves it in a substep \
-             ({fall:.1e} m): its motion is not resolved there, and shorter substeps move it less; simulate it near \
-             the origin (translate the scene, or give the body its own origin)",
-            place / shortest,
-            place as f64 / fall
+             m, {:.1e} of its shortest spring ({shortest:.3e} m){against_motion}: its motion is not resolved there, \
+             and shorter substeps move it less; simulate it near the origin (translate the scene, or give the body \
+             its own origin)",
+            place / shortest
         )
     }
 

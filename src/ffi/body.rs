@@ -670,7 +670,7 @@ pub unsafe extern "C" fn softshell_body_break_edges(
 /// at h = 1e-6 s). A 1 m ball 2 m up, stepped 200 times at time_step 1e-5 s in 10 substeps, falls
 /// 4.4e-6 m instead of 2.0e-5 m with implicit Euler and XPBD (not reported), and is UNSTABLE with
 /// symplectic Euler. When such a step is UNSTABLE, the message says why. A note names the distance,
-/// the step of the positions there, the body's shortest spring and gravity's motion in a substep.
+/// the step of the positions there, the body's shortest spring and its motion in a substep.
 /// Translate the scene so that the body is near the origin, and keep `|g| h^2` above the step of
 /// the positions.
 ///
