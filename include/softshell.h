@@ -640,7 +640,8 @@ struct SoftshellBodyDef softshell_body_def_default(void);
 // (1.18e-38 kg: a tiny total on a mesh of slivers), and with `ground` for a mesh whose free
 // vertices are all below the ground, `SOFTSHELL_STATUS_INVALID_MESH` when the mesh does not suit (with gas: not closed,
 // manifold and outward, every connected piece on its own; always: a triangle with a repeated
-// corner or an edge of zero length),
+// corner or an edge of zero length, or a vertex with a coordinate beyond ±1e9 m, the ground
+// plane's range),
 // `SOFTSHELL_STATUS_UNSUPPORTED` when built without the `body` feature. On success
 // `*out_body` receives a new handle to free with `softshell_body_free`; on failure it is left
 // unchanged.

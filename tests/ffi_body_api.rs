@@ -525,3 +525,27 @@ fn a_mesh_with_an_unused_vertex_makes_a_body_with_the_default_def() {
         assert_eq!(s.position(unused), [5.0, 5.0, 5.0], "the unused vertex has no mass and stays");
     }
 }
+
+/// A vertex beyond ±1e9 m (the ground plane's range) is refused when the body is made, with the
+/// vertex named: a ball of radius 1e20 m was accepted and then UNSTABLE at every step (f32
+/// squares of its lengths overflow), and a unit ball 2e9 m out was refused for a degenerate
+/// triangle, which hid the cause. A ball of radius 5e8 m is made and steps.
+#[test]
+fn a_vertex_beyond_the_coordinate_range_is_refused_by_name() {
+    let (p, t) = icosphere(1, 1.0);
+    let def = softshell_body_def_default();
+    let scaled = |scale: f32, offset: f32| -> Vec<f32> { p.iter().map(|&c| c * scale + offset).collect() };
+    for (scale, offset) in [(1e20f32, 0.0f32), (2e9, 0.0), (1.0, 2e9), (1.0, -3e9)] {
+        let positions = scaled(scale, offset);
+        let first = positions.chunks_exact(3).position(|c| c.iter().any(|v| v.abs() > 1e9)).unwrap();
+        match try_body(&positions, &t, &def) {
+            Err((status, message)) => {
+                assert_eq!(status, SoftshellStatus::InvalidMesh, "{message}");
+                assert!(message.contains(&format!("vertex {first} is at")) && message.contains("1e9"), "{message}");
+            }
+            Ok(_) => panic!("a ball of radius {scale:e} at {offset:e} was made"),
+        }
+    }
+    let big = body(&scaled(5e8, 0.0), &t, &def);
+    step(&big);
+}

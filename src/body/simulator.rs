@@ -304,6 +304,11 @@ const MAX_SUBDIVISION: u32 = 16;
 /// not pay a failed attempt each).
 const CALM_STEPS_TO_COARSEN: u32 = 8;
 
+/// The largest coordinate (m, on any axis) of a vertex when a body is made: the ground plane's
+/// range. A mesh at 1e20 m was accepted and then every step was UNSTABLE ("the energy became
+/// infinite", advising more substeps): f32 squares of its lengths overflow.
+pub(crate) const MAX_COORDINATE: f32 = 1e9;
+
 /// The largest velocity component (m/s) an impulse may give a vertex.
 pub(crate) const MAX_SPEED: f32 = 1e12;
 
@@ -328,6 +333,15 @@ impl Body {
     pub fn new(mesh: &TriMesh, topology: &Topology, settings: BodySettings) -> Result<Self> {
         let x = mesh.positions().to_vec();
         let triangles = mesh.triangles().to_vec();
+        // First: so far out, triangles also come out degenerate, which would hide the cause.
+        if let Some((i, p)) = x.iter().enumerate().find(|(_, p)| p.abs().max_element() > MAX_COORDINATE) {
+            return Err(Error::invalid_mesh(format!(
+                "a soft body's vertices must lie within {MAX_COORDINATE:e} m of the origin on every axis (the ground \
+                 plane's range; f32 positions there move in steps of 64 m, and the squares of lengths over about \
+                 1e19 m overflow): vertex {i} is at ({}, {}, {})",
+                p.x, p.y, p.z
+            )));
+        }
         // SPEC 4: zero-area triangles are refused with their index, cloth or not: they have no
         // normal for wind and gas, and no area to give their corners mass.
         if let Some(t) = first_degenerate_triangle(mesh) {
