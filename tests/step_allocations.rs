@@ -244,12 +244,25 @@ fn steps_that_change_no_topology_allocate_nothing() {
         // none given back, and growths by doubling: some 20 buffers (pairs, hits, refill lists,
         // the CCD queues' heaps, slabs and free lists) that start small while the contacts
         // begin (the sphere's steps 31-100 made about 70).
+        // On two threads a step may also free what an earlier one allocated: a CI run on a
+        // loaded machine (a compilation beside it) saw 4 frees in one step of the sphere, with
+        // no allocation in it, and 5 in all; a dozen other runs that day, 3 of them beside two
+        // busy loops, saw none. The likely source, not caught in the act: rayon's job deques
+        // (crossbeam-deque) retire a buffer that grew or shrank (how far a parallel loop splits
+        // before the other worker steals depends on the scheduling) to crossbeam's epoch
+        // collector, which frees retired memory in batches later. So a step that allocates nothing may free up to
+        // `DEFERRED_FREES`, and the run up to that many more than the pool's allowance; a
+        // temporary still allocates in its step, and one in every step breaks the run's bound.
+        const DEFERRED_FREES: usize = 16;
         let (per_step, in_all) = pool_allowance(threads, 1, counts.len());
+        let deferred = if threads > 1 { DEFERRED_FREES } else { 0 };
         let (wrong, growths) = if collisions {
             let frees: usize = counts.iter().map(|(_, c)| c.frees).sum();
-            let wrong = breaking(&counts, |c| c.frees <= per_step && c.shrinks == 0);
+            let wrong = breaking(&counts, |c| {
+                c.shrinks == 0 && (c.frees <= per_step || (c.allocations == 0 && c.frees <= deferred))
+            });
             let growths: usize = counts.iter().map(|(_, c)| c.allocations).sum();
-            (if frees > in_all { counts.clone() } else { wrong }, growths)
+            (if frees > in_all + deferred { counts.clone() } else { wrong }, growths)
         } else {
             (if within(&counts, threads, 0, 1) { Vec::new() } else { breaking(&counts, |c| c.allocations == 0) }, 0)
         };
