@@ -755,14 +755,14 @@ SoftshellStatus softshell_body_break_edges(struct SoftshellBody *body,
 // in the last place (2.4e-7 m at 2 m, 1e-3 m at 1e4 m, 8e-3 m at 1e5 m), and a substep that
 // moves the body by less than that loses its motion. With the default def a 1 m ball still
 // falls 3e4 m from the origin, and a 0.5 m ball 1e5 m from it is UNSTABLE at its first step;
-// more substeps make it worse (each moves the body less). Very short substeps meet the same
-// limit near the origin: gravity moves a body at rest by `|g| h^2` in a substep of `h` (1e-11 m
-// at h = 1e-6 s). A 1 m ball 2 m up, stepped 200 times at time_step 1e-5 s in 10 substeps, falls
-// 4.4e-6 m instead of 2.0e-5 m with implicit Euler and XPBD (not reported), and is UNSTABLE with
-// symplectic Euler. When such a step is UNSTABLE, the message says why. A note names the distance,
-// the step of the positions there, the body's shortest spring and its motion in a substep.
-// Translate the scene so that the body is near the origin, and keep `|g| h^2` above the step of
-// the positions.
+// more substeps do not help (each moves the body less). Very short steps meet the same limit
+// near the origin: in a step of T from rest, gravity moves a body by about `|g| T h` in the last
+// substep of `h`. A ball of radius 1 m whose top is 2 m up, stepped 200 times at time_step
+// 1e-5 s in 10 substeps, falls 4.4e-6 m instead of 2.0e-5 m with implicit Euler and XPBD (not
+// reported), and is UNSTABLE with symplectic Euler. When such a step is UNSTABLE, the message
+// says why in a note. The note names the distance, the step of the positions there, the body's
+// shortest spring and its motion in a substep. Translate the scene so that the body is near the
+// origin, and keep `|g| T h` above the step of the positions.
 //
 // # Safety
 // `body` must be NULL or a live body; `out_stats` NULL or writable.

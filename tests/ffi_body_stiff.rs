@@ -598,7 +598,7 @@ fn symplectic_advice_counts_the_gas_stiffness() {
 }
 
 /// A body so far from the origin that its f32 positions cannot resolve its motion (a 0.5 m ball
-/// 1e5 m up: positions move in steps of 7.8 mm there, its first step falls 1.4 mm) is UNSTABLE
+/// 1e5 m up: positions move in steps of 7.8 mm there, its first step falls 2.7 mm) is UNSTABLE
 /// at any time step, and its message says why and what helps (it advised only more substeps,
 /// found by review); the same ball near the origin steps, and a 1 m ball 3e4 m up (steps of
 /// 2 mm there, a first step of 2.7 mm) falls as the header says.
@@ -629,9 +629,23 @@ fn a_body_far_from_the_origin_is_told_to_move_near_it() {
         }
         Ok(stats) => panic!("the far body stepped: {stats:?}"),
     }
-    // Substeps so short that gravity moves a body at rest by 1e-11 m in one, against steps of
-    // 2.4e-7 m of the positions 2 m up: symplectic Euler is UNSTABLE there, and the note says
-    // why (implicit Euler and XPBD lose part of the fall without a report: the header says so).
+    // Steps so short that gravity moves a body by 1e-10 m in the last substep of a step from
+    // rest (|g| T h), against steps of 2.4e-7 m of the positions 2 m up (the top of a ball of
+    // radius 1 centred 1 m up): symplectic Euler is UNSTABLE there, and the note says why.
+    // Implicit Euler and XPBD step but lose most of the fall, unreported, as the header says
+    // (a known limit: this part changes when positions keep their remainders).
+    for integrator in [SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, SOFTSHELL_INTEGRATOR_XPBD] {
+        let def = SoftshellBodyDef { time_step: 1e-5, substeps: 10, integrator, ..softshell_body_def_default() };
+        let up: Vec<f32> = p2.chunks_exact(3).flat_map(|c| [c[0], c[1] + 1.0, c[2]]).collect();
+        let b = body(&up, &t2, &def);
+        let start = snapshot(&b).center_y();
+        for _ in 0..200 {
+            step(&b);
+        }
+        let fallen = start - snapshot(&b).center_y();
+        // 0.5 g (200 T)^2 = 1.96e-5 m; the header says 4.4e-6 m.
+        assert!((fallen - 4.4e-6).abs() < 0.5e-6, "integrator {integrator}: fell {fallen:e} m");
+    }
     let short = SoftshellBodyDef {
         time_step: 1e-5,
         substeps: 10,
@@ -654,6 +668,22 @@ fn a_body_far_from_the_origin_is_told_to_move_near_it() {
         ..softshell_body_def_default()
     };
     let stiff = body(&p2, &t2, &stiff);
+    let (status, message) = (0..5).find_map(|_| try_step(&stiff).err()).expect("the stiff body stepped");
+    assert_eq!(status, SoftshellStatus::Unstable, "{message}");
+    assert!(!message.contains("from the origin"), "{message}");
+    // Nor with gravity and 200 substeps (h = 8.3e-5 s, 65 times its stable step): its first
+    // substep's fall |g| h^2 (6.8e-8 m) is below the step of the positions at 1 m (1.2e-7 m),
+    // but the step's fall from rest is not, and its trouble is its stiffness (found by review).
+    let stiff = SoftshellBodyDef {
+        integrator: SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER,
+        total_mass: 0.01,
+        gas_amount: 10.0,
+        spring_stiffness: 1e7,
+        substeps: 200,
+        ..softshell_body_def_default()
+    };
+    let (p1, t1) = icosphere(2, 1.0);
+    let stiff = body(&p1, &t1, &stiff);
     let (status, message) = (0..5).find_map(|_| try_step(&stiff).err()).expect("the stiff body stepped");
     assert_eq!(status, SoftshellStatus::Unstable, "{message}");
     assert!(!message.contains("from the origin"), "{message}");

@@ -107,6 +107,13 @@ struct Corner {
     fragment: u32,
 }
 
+#[cfg(test)]
+thread_local! {
+    /// How many times this thread built corner lists from a topology's fans (the tests tell the
+    /// two ways of building them apart by it).
+    static CORNERS_FROM_FANS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
 /// Vertices per chunk of the parallel measurement (fixed, so the sums do not depend on the
 /// thread count).
 const VERTEX_CHUNK: usize = 2048;
@@ -857,6 +864,8 @@ impl Gas {
         offsets: &mut Vec<u32>,
         corners: &mut Vec<Corner>,
     ) {
+        #[cfg(test)]
+        CORNERS_FROM_FANS.with(|count| count.set(count.get() + 1));
         offsets.clear();
         offsets.extend_from_slice(fan_offsets);
         corners.clear();
@@ -867,7 +876,10 @@ impl Gas {
                 let (next, prev) = match () {
                     _ if t[0] == v => (t[1], t[2]),
                     _ if t[1] == v => (t[2], t[0]),
-                    _ => (t[0], t[1]),
+                    _ => {
+                        debug_assert_eq!(t[2], v, "face {f} in the fan of vertex {v}");
+                        (t[0], t[1])
+                    }
                 };
                 Corner { next, prev, fragment: self.face_fragment[f as usize] }
             }));
@@ -1324,12 +1336,15 @@ mod tests {
             let topology = crate::mesh::Topology::build(&t, n);
             assert_eq!(topology.vertex_faces.len() == 3 * t.len(), !degenerate);
             let mut from_fans = Gas::new(n, &t, &fragments, 2, &[]);
+            let read_from_fans = CORNERS_FROM_FANS.with(|count| count.get());
             from_fans.prepare_corners_after_change(
                 &t,
                 n,
                 None,
                 Some((&topology.vertex_face_offsets, &topology.vertex_faces)),
             );
+            // The fans were read, but for the degenerate face (its corners were scattered).
+            assert_eq!(CORNERS_FROM_FANS.with(|count| count.get()) - read_from_fans, usize::from(!degenerate));
             let reference = scattered(&t, &fragments);
             assert_eq!(debug(&from_fans), debug(&reference), "degenerate face: {degenerate}");
             assert!(from_fans.rings.same_rings(&reference.rings));

@@ -929,12 +929,14 @@ impl Body {
     /// For an UNSTABLE message whose step took substeps of `h`: a note when the body lies so far
     /// from the origin that its f32 positions cannot resolve its motion, else nothing: where a
     /// step of the positions there (one unit in the last place) is over a thousandth of its
-    /// shortest spring, or over the body's motion in one substep (the larger of what gravity
-    /// moves a body at rest, `|g| h²`, and its fastest vertex's `|v| h`; none when both are
-    /// zero). There a falling body's first step moves it by less than one such step,
-    /// gravity releases no energy the step's tests can see, and no time step helps (a 0.5 m ball
-    /// 1e5 m up was UNSTABLE at its first step, advised more substeps, found by review; a ball
-    /// of radius 1e15 m, whose springs are long enough for the first test, got the same advice).
+    /// shortest spring, or over what the last substep of this step moves the body (the larger of
+    /// `|g| T h`, a body falling from rest for the whole step T, and its fastest vertex's `|v| h`;
+    /// none when both are zero). There a falling body's first step moves it by less than one
+    /// such step, gravity releases no energy the step's tests can see, and shorter substeps do
+    /// not help (a 0.5 m ball 1e5 m up was UNSTABLE at its first step, advised more substeps,
+    /// found by review; so were very short substeps near the origin). Not `|g| h²`, the first
+    /// substep's fall: with that a stiff ball at the origin at rest, UNSTABLE for its stiffness
+    /// with 200 substeps, was told to move near the origin (found by review).
     fn precision_advice(&self, h: f64) -> String {
         let farthest = self.nodes.x.iter().map(|x| x.abs().max_element()).fold(0.0f32, f32::max);
         let shortest = self.springs.rest.iter().copied().filter(|&l| l > 0.0).fold(f32::INFINITY, f32::min);
@@ -943,15 +945,16 @@ impl Body {
         }
         let place = f32::from_bits(farthest.to_bits() + 1) - farthest;
         let fastest = self.nodes.v.iter().map(|v| v.length()).fold(0.0f32, f32::max) as f64;
-        let motion = (self.settings.gravity.length() as f64 * h * h).max(fastest * h);
+        let step = self.settings.time_step as f64;
+        let motion = (self.settings.gravity.length() as f64 * step).max(fastest) * h;
         let unresolved_motion = motion > 0.0 && place as f64 > motion;
         if place <= 1e-3 * shortest && !unresolved_motion {
             return String::new();
         }
         let against_motion = if motion > 0.0 && motion.is_finite() {
             format!(
-                " and {:.1e} times its motion in a substep ({motion:.1e} m: gravity's |g| h^2 or its fastest vertex's \
-                 |v| h)",
+                " and {:.1e} times its motion in a substep ({motion:.1e} m: |g| time_step h, its fall from rest, or \
+                 its fastest vertex's |v| h)",
                 place as f64 / motion
             )
         } else {
