@@ -612,14 +612,18 @@ fn a_body_far_from_the_origin_is_told_to_move_near_it() {
         step(&near);
     }
     let (p2, t2) = icosphere(2, 1.0);
-    let up: Vec<f32> = p2.chunks_exact(3).flat_map(|c| [c[0], c[1] + 3e4, c[2]]).collect();
-    let middle = body(&up, &t2, &def);
-    let start = snapshot(&middle).center_y();
-    for _ in 0..30 {
-        step(&middle);
-    }
+    let raised = |height: f32| -> Vec<f32> { p2.chunks_exact(3).flat_map(|c| [c[0], c[1] + height, c[2]]).collect() };
+    // How far the centre of a ball of radius 1 raised by `height` falls in `steps` steps.
+    let fall = |height: f32, def: &SoftshellBodyDef, steps: usize| -> f64 {
+        let b = body(&raised(height), &t2, def);
+        let start = snapshot(&b).center_y();
+        for _ in 0..steps {
+            step(&b);
+        }
+        start - snapshot(&b).center_y()
+    };
     // Half a second of free fall: 1.2 m (to the resolution of 2 mm there).
-    let fallen = start - snapshot(&middle).center_y();
+    let fallen = fall(3e4, &def, 30);
     assert!((fallen - 0.5 * 9.81 * 0.25).abs() < 0.1, "fell {fallen} m");
     let far = body(&far, &t, &def);
     match try_step(&far) {
@@ -636,13 +640,7 @@ fn a_body_far_from_the_origin_is_told_to_move_near_it() {
     // (a known limit: this part changes when positions keep their remainders).
     for integrator in [SOFTSHELL_INTEGRATOR_IMPLICIT_EULER, SOFTSHELL_INTEGRATOR_XPBD] {
         let def = SoftshellBodyDef { time_step: 1e-5, substeps: 10, integrator, ..softshell_body_def_default() };
-        let up: Vec<f32> = p2.chunks_exact(3).flat_map(|c| [c[0], c[1] + 1.0, c[2]]).collect();
-        let b = body(&up, &t2, &def);
-        let start = snapshot(&b).center_y();
-        for _ in 0..200 {
-            step(&b);
-        }
-        let fallen = start - snapshot(&b).center_y();
+        let fallen = fall(1.0, &def, 200);
         // 0.5 g (200 T)^2 = 1.96e-5 m; the header says 4.4e-6 m.
         assert!((fallen - 4.4e-6).abs() < 0.5e-6, "integrator {integrator}: fell {fallen:e} m");
     }
@@ -652,8 +650,7 @@ fn a_body_far_from_the_origin_is_told_to_move_near_it() {
         integrator: SOFTSHELL_INTEGRATOR_SYMPLECTIC_EULER,
         ..softshell_body_def_default()
     };
-    let up: Vec<f32> = p2.chunks_exact(3).flat_map(|c| [c[0], c[1] + 1.0, c[2]]).collect();
-    let short = body(&up, &t2, &short);
+    let short = body(&raised(1.0), &t2, &short);
     let failed = (0..5).find_map(|_| try_step(&short).err());
     let (status, message) = failed.expect("the short substeps' body stepped");
     assert_eq!(status, SoftshellStatus::Unstable, "{message}");
