@@ -23,7 +23,7 @@ mod random;
 use std::ptr::null_mut;
 
 use common::*;
-use random::{Outcome, Rng, count, replay_on_threads, seeds};
+use random::{Outcome, Rng, count, lattice_refused_calls, replay_on_threads, seeds};
 use softshell::ffi::SoftshellStatus;
 use softshell::ffi::lattice::*;
 
@@ -205,16 +205,7 @@ fn run_session(seed: u64, actions: usize, threads: u32, tally: &mut Tally) -> Ve
         } else {
             // A site outside the lattice, a NaN force, a wrong count of positions: each refused
             // with nothing changed.
-            let nan = [f32::NAN, 0.0, 0.0];
-            let short = vec![0.0f32; 3 * particles - 1];
-            // SAFETY: live lattice; float[3]; `short` holds its floats.
-            let statuses = unsafe {
-                [
-                    softshell_lattice_pin(lattice, columns, 0),
-                    softshell_lattice_apply_force(lattice, 0, 0, nan.as_ptr()),
-                    softshell_lattice_set_positions(lattice, short.as_ptr(), short.len()),
-                ]
-            };
+            let statuses = lattice_refused_calls(lattice, columns, particles);
             tally.refused_calls += 1;
             (format!("refused calls {statuses:?}"), statuses[2], None)
         };

@@ -115,3 +115,24 @@ pub fn replay_on_threads<T: Default>(
     }
     failures
 }
+
+/// Three calls a lattice of `columns` columns and `particles` particles must refuse, changing
+/// nothing: a pin of a site outside it, a NaN force, positions one float short. Their statuses.
+#[cfg(feature = "lattice")]
+pub fn lattice_refused_calls(
+    lattice: *mut softshell::ffi::SoftshellLattice,
+    columns: u32,
+    particles: usize,
+) -> [SoftshellStatus; 3] {
+    use softshell::ffi::lattice::*;
+    let nan = [f32::NAN, 0.0, 0.0];
+    let short = vec![0.0f32; 3 * particles - 1];
+    // SAFETY: the caller's live lattice; float[3]; `short` holds its floats.
+    unsafe {
+        [
+            softshell_lattice_pin(lattice, columns, 0),
+            softshell_lattice_apply_force(lattice, 0, 0, nan.as_ptr()),
+            softshell_lattice_set_positions(lattice, short.as_ptr(), short.len()),
+        ]
+    }
+}
